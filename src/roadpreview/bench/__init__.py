@@ -1,0 +1,20 @@
+"""Benchmarks behind ``roadpreview bench``: medians over repeats, ratios from one run.
+
+Each benchmark module exposes ``run(repeats, quick, seed) -> str`` returning
+the printed table. Modules are imported lazily by name.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+#: benchmark name -> module
+BENCHMARKS: dict[str, str] = {
+    "pitch": "roadpreview.bench.pitch",
+}
+
+
+def run_benchmark(name: str, *, repeats: int | None = None, quick: bool = False, seed: int = 0) -> str:
+    """Run benchmark ``name`` and return its printed table."""
+    module = importlib.import_module(BENCHMARKS[name])
+    return str(module.run(repeats=repeats, quick=quick, seed=seed))

@@ -1,0 +1,1 @@
+"""Command-line interface: ``roadpreview <command>``; one module per command."""

@@ -1,0 +1,1 @@
+"""Drive simulator: roads, vehicle dynamics, a rendered camera, IMU and CAN, with ground truth."""
