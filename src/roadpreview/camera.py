@@ -188,14 +188,14 @@ class CameraModel:
 
     # -- geometry -----------------------------------------------------------------
     @property
-    def K(self) -> NDArray[np.float64]:  # noqa: N802 - the paper's symbol
+    def K(self) -> NDArray[np.float64]:
         """The 3x3 intrinsic matrix."""
         return np.array(
             [[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]], dtype=np.float64
         )
 
     @property
-    def K_inv(self) -> NDArray[np.float64]:  # noqa: N802
+    def K_inv(self) -> NDArray[np.float64]:
         """Inverse of `K` (closed form)."""
         return np.array(
             [

@@ -34,7 +34,7 @@ def param(
     default: Any = dataclasses.MISSING,
     *,
     unit: str = "",
-    help: str = "",  # noqa: A002 - reads naturally at the call site
+    help: str = "",
     gt: float | None = None,
     ge: float | None = None,
     lt: float | None = None,
@@ -99,7 +99,10 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
         if origin is tuple and args and args[-1] is not Ellipsis:
             if len(value) != len(args):
                 raise ConfigError(f"{where}: must have {len(args)} elements, got {len(value)}")
-            return tuple(_convert(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+            return tuple(
+                _convert(v, a, f"{where}[{i}]")
+                for i, (v, a) in enumerate(zip(value, args, strict=True))
+            )
         inner = args[0] if args else Any
         items = [_convert(v, inner, f"{where}[{i}]") for i, v in enumerate(value)]
         return tuple(items) if origin is tuple else items
@@ -132,8 +135,7 @@ def _build(cls: type[T], data: Mapping[str, Any], where: str) -> T:
     if unknown:
         prefix = f"{where}." if where else ""
         raise ConfigError(
-            f"unknown key {prefix}{unknown[0]!s}"
-            f" (known keys: {', '.join(sorted(fields))})"
+            f"unknown key {prefix}{unknown[0]!s} (known keys: {', '.join(sorted(fields))})"
         )
     hints = _type_hints(cls)
     kwargs: dict[str, Any] = {}

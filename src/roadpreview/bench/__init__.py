@@ -14,7 +14,9 @@ BENCHMARKS: dict[str, str] = {
 }
 
 
-def run_benchmark(name: str, *, repeats: int | None = None, quick: bool = False, seed: int = 0) -> str:
+def run_benchmark(
+    name: str, *, repeats: int | None = None, quick: bool = False, seed: int = 0
+) -> str:
     """Run benchmark ``name`` and return its printed table."""
     module = importlib.import_module(BENCHMARKS[name])
     return str(module.run(repeats=repeats, quick=quick, seed=seed))

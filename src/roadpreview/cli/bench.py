@@ -15,7 +15,9 @@ def add_subparser(sub: Any) -> None:
         description="Speed benchmarks. Each prints a table; ratios are measured in one run.",
     )
     p.add_argument("name", choices=[*BENCHMARKS, "all"], help="which benchmark")
-    p.add_argument("--repeats", type=int, default=None, help="repeats per case (default: per bench)")
+    p.add_argument(
+        "--repeats", type=int, default=None, help="repeats per case (default: per bench)"
+    )
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes (smoke run)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the synthetic inputs")
     p.set_defaults(func=_run)

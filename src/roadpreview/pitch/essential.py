@@ -1,0 +1,124 @@
+"""The paper's baseline: pitch from the essential matrix (5-point RANSAC or USAC).
+
+``cv2.findEssentialMat`` + ``cv2.recoverPose`` give R with ``X_cur = R X_ref + t``;
+the pitch is read off R in the convention of ``docs/method.md``
+(``R(φ) @ (0, 0, 1) = (0, sin φ, cos φ)``), i.e. ``φ = atan2(R[1, 2], R[2, 2])``
+for the rotation about the camera x axis.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike
+
+from roadpreview.camera import CameraModel
+from roadpreview.configtools import check_ranges, param
+from roadpreview.pitch.base import PitchEstimate, validate_correspondences
+
+_METHODS = {
+    "ransac": cv2.RANSAC,
+    "usac": getattr(cv2, "USAC_DEFAULT", cv2.RANSAC),
+    "usac_magsac": getattr(cv2, "USAC_MAGSAC", cv2.RANSAC),
+    "lmeds": cv2.LMEDS,
+}
+
+
+@dataclass(frozen=True)
+class EssentialPitchConfig:
+    """Settings of `EssentialMatrixPitchEstimator`."""
+
+    method: str = param(
+        "ransac",
+        choices=tuple(_METHODS),
+        help="the paper's baseline is 5-point RANSAC; USAC is OpenCV's faster modern variant",
+    )
+    threshold_px: float = param(1.0, unit="px", gt=0.0, help="RANSAC inlier threshold")
+    confidence: float = param(0.999, gt=0.0, lt=1.0, help="RANSAC success probability")
+    max_iters: int = param(1000, ge=1, help="RANSAC iteration cap")
+    min_correspondences: int = param(8, ge=5, help="5 for the solver, a few more for RANSAC")
+    min_inlier_ratio: float = param(0.25, ge=0.0, le=1.0, help="below: falsy 'poor fit'")
+
+    def validate(self, where: str = "") -> None:
+        pass
+
+
+def pitch_from_rotation(R: np.ndarray) -> float:
+    """The pitch angle (nose up positive) of a rotation matrix in our convention."""
+    return math.atan2(float(R[1, 2]), float(R[2, 2]))
+
+
+class EssentialMatrixPitchEstimator:
+    """Pitch from a full 5-point essential-matrix fit (baseline of the paper)."""
+
+    name = "essential"
+
+    def __init__(self, camera: CameraModel, config: EssentialPitchConfig | None = None) -> None:
+        self.camera = camera
+        self.config = config or EssentialPitchConfig()
+        check_ranges(self.config, "pitch")
+
+    def reset(self) -> None:
+        """Stateless: nothing to forget."""
+
+    def estimate(self, x_ref: ArrayLike, x_cur: ArrayLike) -> PitchEstimate:
+        cfg = self.config
+        a, b, n_invalid = validate_correspondences(x_ref, x_cur)
+        n = a.shape[0]
+        if n < cfg.min_correspondences:
+            return PitchEstimate.failed(
+                f"too few correspondences: {n} valid < {cfg.min_correspondences}",
+                n_points=n,
+                n_invalid=n_invalid,
+            )
+        K = self.camera.K
+        E, mask = cv2.findEssentialMat(
+            a,
+            b,
+            K,
+            method=_METHODS[cfg.method],
+            prob=cfg.confidence,
+            threshold=cfg.threshold_px,
+            maxIters=cfg.max_iters,
+        )
+        if E is None or E.shape[0] < 3 or mask is None:
+            return PitchEstimate.failed(
+                "essential matrix: no solution", n_points=n, n_invalid=n_invalid
+            )
+        # several solutions may come stacked (3k x 3): keep the one that puts the most
+        # RANSAC inliers in front of both cameras (recoverPose's cheirality test)
+        best: tuple[int, np.ndarray] | None = None
+        for k in range(E.shape[0] // 3):  # at most 10 candidate solutions, not points
+            n_good, R, _, _ = cv2.recoverPose(E[3 * k : 3 * k + 3], a, b, K, mask=mask.copy())
+            if best is None or n_good > best[0]:
+                best = (int(n_good), R)
+        assert best is not None
+        n_good, R = best
+        inlier_ratio = float(np.count_nonzero(mask)) / n
+        if n_good < 5:
+            # near-zero translation: recoverPose puts every point at infinity and its
+            # cheirality vote is empty. The two rotations of E differ by a half turn
+            # about the baseline; a car's is the one near the identity.
+            R1, R2, _ = cv2.decomposeEssentialMat(E[:3])
+            R = min(
+                (R1, R2), key=lambda Rk: float(np.arccos(np.clip((np.trace(Rk) - 1) / 2, -1, 1)))
+            )
+        yaw = math.atan2(float(R[0, 2]), float(R[2, 2]))
+        roll = math.atan2(float(R[0, 1]), float(R[1, 1]))
+        return PitchEstimate(
+            phi=pitch_from_rotation(R),
+            std=math.nan,
+            inlier_ratio=inlier_ratio,
+            iterations=0,
+            converged=True,
+            n_points=n,
+            reason=""
+            if inlier_ratio >= cfg.min_inlier_ratio
+            else (f"poor fit: inlier ratio {inlier_ratio:.2f} < {cfg.min_inlier_ratio:.2f}"),
+            yaw=yaw,
+            roll=roll,
+            n_invalid=n_invalid,
+        )
