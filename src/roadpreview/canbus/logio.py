@@ -1,0 +1,372 @@
+"""Write and read CAN log files (Vector BLF and ASC, candump ``-L`` .log) with python-can.
+
+The format follows the file suffix: ``.blf``, ``.asc``, ``.log`` and, for the
+text formats, their gzip variants ``.asc.gz`` and ``.log.gz`` (python-can
+cannot gzip BLF, which is compressed already).
+
+Writing goes through ``can.Logger``. Reading uses python-can's own readers
+(the ones ``can.LogReader`` picks by suffix) but never dies on bad data: **a
+garbled CAN frame is logged and skipped, never a crash**, as a replay or a
+daemon needs. For the text formats the reader is resumed on the line after
+the bad one, so frames after the garbage are not lost; each problem is
+recorded as a `LogProblem` naming the file and line. A BLF file cannot be
+resynchronised after corrupt bytes: the frames before them are delivered,
+then reading stops with a problem naming the byte offset. A truncated BLF
+(a logger that lost power) delivers every complete frame and reports the
+truncation. With ``errors="raise"`` every valid frame is still delivered
+first and an `InputDataError` summarising the problems is raised at the end.
+
+Timestamps are what the logger stored, in seconds (normally Unix time):
+
+* candump .log: absolute, 1 µs resolution.
+* BLF: start of measurement as a calendar date (1 ms, UTC) plus offsets in
+  ns; python-can takes timestamps before 1990 for "not a date" and drops
+  the start, so `write_can_log` refuses them for BLF.
+* ASC: the start of measurement as a *local-time* calendar date (1 ms)
+  plus offsets in µs. We start the measurement on the whole second before
+  the first frame (as CANoe does, the first frame need not be at 0), so the
+  absolute times survive to 1 µs, and read them back as absolute times
+  (``relative_timestamp=False``); both ends must use the same time zone.
+  python-can's own ASC reader defaults to times relative to the start.
+
+Channels: the simulator writes channel 0, which ASC and BLF store as channel
+1 (their numbering starts at 1) and candump as ``can0``. `read_can_log`
+turns every one of these back into the integer 0 (``canN``/``vcanN`` -> N),
+so one bus has one channel number whatever the format.
+"""
+
+from __future__ import annotations
+
+import gzip
+import logging
+import math
+import os
+import re
+import struct
+import zlib
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import IO, Any, Literal, TextIO, cast
+
+import can
+from can.io.blf import BLFParseError
+from can.io.generic import MessageWriter
+
+from roadpreview.errors import ConfigError, InputDataError
+
+log = logging.getLogger(__name__)
+
+#: suffixes `write_can_log` and `read_can_log` understand
+LOG_SUFFIXES = (".blf", ".asc", ".log", ".asc.gz", ".log.gz")
+
+#: python-can's BLF code treats earlier timestamps as "not a Unix time" (1990-01-01)
+_BLF_MIN_TIMESTAMP = 631152000.0
+
+_CHANNEL_NAME = re.compile(r"^[a-z]*can(\d+)$", re.IGNORECASE)
+
+
+def log_format(path: str | Path) -> tuple[str, bool]:
+    """The format of a CAN log from its suffix: (``".blf"|".asc"|".log"``, gzipped).
+
+    Raises `InputDataError` for anything else.
+    """
+    suffixes = [s.lower() for s in Path(path).suffixes]
+    gz = bool(suffixes) and suffixes[-1] == ".gz"
+    base = suffixes[-2] if gz and len(suffixes) >= 2 else (suffixes[-1] if suffixes else "")
+    if base not in (".blf", ".asc", ".log") or (gz and base == ".blf"):
+        raise InputDataError(
+            f"{path}: unknown CAN log format; use one of {', '.join(LOG_SUFFIXES)}"
+        )
+    return base, gz
+
+
+class _ASCWriter(can.ASCWriter):
+    """python-can's ASC writer with the measurement starting on a whole second.
+
+    python-can starts the measurement at the first frame and writes the start
+    date with millisecond resolution, so the sub-millisecond part of every
+    absolute time is lost, and it writes 5 ms as ``.5`` (read back as 500 ms).
+    Starting on the whole second and writing three digits keeps every
+    timestamp exact to the file's 1 µs.
+    """
+
+    def _format_header_datetime(self, dt: datetime) -> str:
+        return f"{dt.strftime('%a %b %d %H:%M:%S')}.{dt.microsecond // 1000:03d} {dt.year}"
+
+    def log_event(self, message: str, timestamp: float | None = None) -> None:
+        if not self.header_written and timestamp is not None:
+            self.started = self.last_timestamp = float(math.floor(timestamp))
+            start = self._format_header_datetime(datetime.fromtimestamp(self.started))
+            self.file.write(f"Begin Triggerblock {start}\n")
+            self.header_written = True
+            super().log_event("Start of measurement", self.started)
+        super().log_event(message, timestamp)
+
+
+def _open_writer(path: str | Path, fmt: str, gz: bool) -> MessageWriter:
+    if fmt == ".asc":
+        if gz:
+            return _ASCWriter(gzip.open(path, mode="wt", encoding="utf-8"))
+        return _ASCWriter(os.fspath(path))
+    return can.Logger(os.fspath(path))
+
+
+def write_can_log(path: str | Path, messages: Iterable[can.Message]) -> int:
+    """Write ``messages`` (in reception order) to a CAN log chosen by suffix; return the count.
+
+    Timestamps must not decrease (a logger stores frames as they arrive);
+    for BLF they must be Unix times (>= 1990). On an error the partly
+    written file is removed and `InputDataError` names the message index.
+    """
+    try:
+        fmt, gz = log_format(path)
+    except InputDataError as exc:
+        raise ConfigError(str(exc)) from None
+    count = 0
+    last = -float("inf")
+    try:
+        with _open_writer(path, fmt, gz) as writer:
+            for msg in messages:
+                ts = float(msg.timestamp)
+                if ts < last:
+                    raise InputDataError(
+                        f"{path}: message {count} has timestamp {ts:.6f} s, earlier than the"
+                        f" previous {last:.6f} s; a CAN log is in reception order"
+                    )
+                if fmt == ".blf" and count == 0 and ts < _BLF_MIN_TIMESTAMP:
+                    raise InputDataError(
+                        f"{path}: first timestamp {ts:.6f} s is not a Unix time; BLF stores the"
+                        " start as a calendar date and python-can would read these frames back"
+                        " shifted (add a Unix epoch offset)"
+                    )
+                writer.on_message_received(msg)
+                last = ts
+                count += 1
+    except BaseException:
+        Path(path).unlink(missing_ok=True)
+        raise
+    return count
+
+
+@dataclass(frozen=True)
+class LogProblem:
+    """One bad spot in a CAN log: where, why, and whether reading stopped there."""
+
+    path: str
+    reason: str
+    line: int | None = None
+    byte_offset: int | None = None
+    fatal: bool = False
+
+    def __str__(self) -> str:
+        where = self.path
+        if self.line is not None:
+            where += f":{self.line}"
+        elif self.byte_offset is not None:
+            where += f" (byte {self.byte_offset})"
+        what = "reading stopped" if self.fatal else "frame skipped"
+        return f"{where}: {self.reason}; {what}"
+
+
+def _channel_number(channel: Any) -> Any:
+    """``canN``/``vcanN`` -> N; integers stay; other names are kept as they are."""
+    if isinstance(channel, str):
+        m = _CHANNEL_NAME.match(channel.strip())
+        if m:
+            return int(m.group(1))
+    return channel
+
+
+class _CountingLines:
+    """A text file seen line by line, counting lines, surviving a reader's ``close()``.
+
+    python-can's text readers iterate over their file and close it when done;
+    we hand each (possibly resumed) reader this object instead, so that the
+    line number of a bad line is known and the next reader continues after it.
+    Errors of the file itself (a truncated gzip stream) end the iteration and
+    are kept in ``broken``.
+    """
+
+    def __init__(self, f: IO[str]) -> None:
+        self._f = f
+        self.line_no = 0
+        self.broken: BaseException | None = None
+
+    def __iter__(self) -> _CountingLines:
+        return self
+
+    def __next__(self) -> str:
+        if self.broken is not None:
+            raise StopIteration
+        try:
+            line = next(self._f)
+        except (OSError, EOFError, zlib.error) as exc:
+            self.broken = exc
+            raise StopIteration from None
+        self.line_no += 1
+        return line
+
+    def close(self) -> None:
+        """Ignored: the file belongs to `CanLogReader`."""
+
+
+class _ResumableASCReader(can.ASCReader):
+    """python-can's ASC reader, able to continue a file after a bad line.
+
+    A resumed reader keeps the number base and the start of measurement of
+    the reader it replaces and does not look for the file header again.
+    """
+
+    def __init__(self, file: _CountingLines, previous: object = None) -> None:
+        if not isinstance(previous, _ResumableASCReader):
+            previous = None
+        base = previous.base if previous is not None else "hex"
+        super().__init__(cast("TextIO", file), base=base, relative_timestamp=False)
+        self._resumed = previous is not None
+        if previous is not None:
+            self.start_time = previous.start_time
+            self.date = previous.date
+
+    def _extract_header(self) -> None:
+        if not self._resumed:
+            super()._extract_header()
+
+
+class CanLogReader:
+    """Iterate over the frames of a CAN log, skipping and recording garbled ones.
+
+    ``errors="log"`` (for replay and daemons) logs each problem and carries
+    on; ``errors="raise"`` also delivers every valid frame, then raises
+    `InputDataError` at the end if there was any problem. After (or during)
+    an iteration ``problems`` lists what went wrong. Channels are normalised
+    to integers (module docstring).
+    """
+
+    def __init__(self, path: str | Path, *, errors: Literal["log", "raise"] = "log") -> None:
+        if errors not in ("log", "raise"):
+            raise ConfigError(f"errors = {errors!r}: must be 'log' or 'raise'")
+        self.path = Path(path)
+        self.errors = errors
+        self.format, self.gzipped = log_format(path)
+        self.problems: list[LogProblem] = []
+
+    def __iter__(self) -> Iterator[can.Message]:
+        self.problems = []
+        if not self.path.is_file():
+            raise InputDataError(f"{self.path}: CAN log not found")
+        frames = self._iter_blf() if self.format == ".blf" else self._iter_text()
+        for msg in frames:
+            msg.channel = _channel_number(msg.channel)
+            yield msg
+        if self.problems and self.errors == "raise":
+            first = self.problems[0]
+            raise InputDataError(f"{first} ({len(self.problems)} problem(s) in this log)")
+
+    def _problem(self, problem: LogProblem) -> None:
+        self.problems.append(problem)
+        if problem.fatal:
+            log.error("%s", problem)
+        else:
+            log.warning("%s", problem)
+
+    def _open_text(self) -> IO[str]:
+        if self.gzipped:
+            return gzip.open(self.path, mode="rt", encoding="utf-8", errors="replace")
+        return open(self.path, encoding="utf-8", errors="replace")
+
+    def _iter_text(self) -> Iterator[can.Message]:
+        make: Callable[[_CountingLines, Any], Any]
+        if self.format == ".asc":
+            make = _ResumableASCReader
+        else:
+            make = lambda lines, _previous: can.CanutilsLogReader(cast("TextIO", lines))  # noqa: E731
+        with self._open_text() as f:
+            lines = _CountingLines(f)
+            reader = make(lines, None)
+            failed_at = -1
+            while True:
+                try:
+                    yield from reader
+                    break
+                # Any exception of a python-can parser here means a line it could
+                # not make sense of; the contract is to log and skip it.
+                except Exception as exc:
+                    if lines.line_no == failed_at:  # nothing consumed: do not loop
+                        self._problem(
+                            LogProblem(str(self.path), f"reader stuck ({exc!r})", fatal=True)
+                        )
+                        return
+                    failed_at = lines.line_no
+                    self._problem(
+                        LogProblem(
+                            str(self.path), f"garbled CAN frame ({exc!r})", line=lines.line_no
+                        )
+                    )
+                    reader = make(lines, reader)
+            if lines.broken is not None:
+                self._problem(
+                    LogProblem(
+                        str(self.path),
+                        f"file ends abruptly ({lines.broken!r})",
+                        line=lines.line_no + 1,
+                        fatal=True,
+                    )
+                )
+
+    def _iter_blf(self) -> Iterator[can.Message]:
+        actual_size = self.path.stat().st_size
+        with open(self.path, "rb") as f:
+            try:
+                reader = can.BLFReader(f)
+            except (BLFParseError, struct.error, ValueError) as exc:
+                self._problem(
+                    LogProblem(
+                        str(self.path), f"not a BLF file ({exc!r})", byte_offset=0, fatal=True
+                    )
+                )
+                return
+            declared_size = int(reader.file_size)
+            start_known = bool(reader.start_timestamp)
+            try:
+                yield from reader
+            except (BLFParseError, struct.error, zlib.error, ValueError, EOFError) as exc:
+                self._problem(
+                    LogProblem(
+                        str(self.path),
+                        f"corrupt BLF data ({exc!r})",
+                        byte_offset=f.tell(),
+                        fatal=True,
+                    )
+                )
+                return
+        if actual_size < declared_size:
+            reason = (
+                f"truncated BLF: {actual_size} of {declared_size} bytes"
+                " (frames in the missing part are lost)"
+            )
+        elif actual_size > declared_size:
+            reason = (
+                f"BLF header never finalised (it says {declared_size} bytes, the file has"
+                f" {actual_size}): the logger was not closed, its last buffered frames"
+                " are missing"
+            )
+            if not start_known:
+                reason += " and, with no start date, times are relative to the start"
+        else:
+            return
+        self._problem(LogProblem(str(self.path), reason, byte_offset=actual_size, fatal=True))
+
+
+def read_can_log(
+    path: str | Path, *, errors: Literal["log", "raise"] = "log"
+) -> Iterator[can.Message]:
+    """The frames of a CAN log (format by suffix), garbled frames logged and skipped.
+
+    See `CanLogReader` for ``errors``; use the class to see the problems.
+    """
+    reader = CanLogReader(path, errors=errors)
+    if not reader.path.is_file():
+        raise InputDataError(f"{path}: CAN log not found")
+    return iter(reader)

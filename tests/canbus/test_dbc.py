@@ -1,0 +1,261 @@
+"""The project DBC: loads strictly, is fully documented, and every simulated frame decodes back."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import can
+import cantools
+import numpy as np
+import pytest
+from cantools.database.can import Database
+
+from roadpreview.canbus.dbc import (
+    E2E_COUNTER_MODULUS,
+    IMU_ACCEL,
+    IMU_RATES,
+    RESERVED_OUTPUT_IDS,
+    VEHICLE_SPEED,
+    WHEEL_SPEEDS,
+    check_protected,
+    e2e_layout,
+    encode_protected,
+    load_database,
+)
+from roadpreview.errors import InputDataError
+from roadpreview.sim.canlog import (
+    DEFAULT_T0_UNIX_S,
+    imu_to_messages,
+    merge_on_bus,
+    speed_to_messages,
+)
+from roadpreview.sim.imu import (
+    DEG,
+    KMH,
+    ImuConfig,
+    ImuMeasurements,
+    ImuSamples,
+    SpeedSamples,
+    SpeedSensorConfig,
+    simulate_imu,
+    simulate_speed,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+REPO_DBC = ROOT / "data" / "roadpreview.dbc"
+
+
+def _crc8_j1850(data: bytes, init: int = 0x00) -> int:
+    """CRC-8 SAE J1850 (poly 0x1D), no final XOR; E2E P01 chains it from start 0x00."""
+    crc = init
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc
+
+
+def _p01_crc(data_id: int, payload: bytes) -> int:
+    return _crc8_j1850(bytes([data_id & 0xFF, data_id >> 8]) + payload[1:])
+
+
+@pytest.fixture(scope="module")
+def db() -> Database:
+    return load_database()
+
+
+@pytest.fixture(scope="module")
+def imu_samples() -> ImuSamples:
+    t = np.arange(0.0, 3.0005, 0.001)
+    zeros = np.zeros_like(t)
+    omega = np.column_stack([
+        0.3 * np.sin(3 * t), 0.5 * np.sin(5 * t), 1.2 * np.sin(1.1 * t),  # up to ~70 deg/s
+    ])
+    acc = np.column_stack([2 * np.sin(t), 3 * np.cos(2 * t), 4 * np.sin(7 * t)])
+    att = np.column_stack([0.05 * np.sin(t), 0.03 * np.sin(2 * t), zeros])
+    return simulate_imu(t, omega, acc, att, ImuConfig.smartphone(), np.random.default_rng(11))
+
+
+@pytest.fixture(scope="module")
+def speed_samples() -> SpeedSamples:
+    t = np.arange(0.0, 3.0005, 0.001)
+    v = np.interp(t, [0, 0.5, 1.0, 3.0], [0.0, 0.0, 30.0, 70.0])  # up to 252 km/h
+    wheels = np.column_stack([v * 1.01, v * 0.99, v, v * 1.002])
+    return simulate_speed(t, v, SpeedSensorConfig(), np.random.default_rng(12), wheels)
+
+
+# --- the file ---------------------------------------------------------------------------------
+
+
+def test_repo_copy_is_a_relative_symlink_to_the_packaged_dbc() -> None:
+    assert REPO_DBC.is_symlink()
+    assert not os.path.isabs(os.readlink(REPO_DBC))
+    packaged = ROOT / "src" / "roadpreview" / "data" / "roadpreview.dbc"
+    assert REPO_DBC.resolve() == packaged.resolve()
+
+
+def test_loads_strict_with_cantools(db: Database) -> None:
+    direct = cantools.database.load_file(REPO_DBC, strict=True)
+    assert isinstance(direct, Database)
+    assert sorted(m.name for m in direct.messages) == sorted(m.name for m in db.messages)
+    assert load_database(REPO_DBC).get_message_by_name(IMU_RATES).frame_id == 0x130
+
+
+def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> None:
+    names = {IMU_RATES: 0x130, IMU_ACCEL: 0x131, VEHICLE_SPEED: 0x140, WHEEL_SPEEDS: 0x141}
+    assert {m.name: m.frame_id for m in db.messages} == names
+    for m in db.messages:
+        assert not m.is_extended_frame
+        assert m.frame_id < 0x800
+        assert 0x130 <= m.frame_id <= 0x14F
+        assert m.frame_id not in RESERVED_OUTPUT_IDS
+        assert m.length == 8
+        assert m.cycle_time in (10, 20)
+        assert m.comment
+        assert m.senders
+        layout = e2e_layout(m)
+        assert layout.data_id == m.frame_id
+        for s in m.signals:
+            assert s.comment, f"{m.name}.{s.name} has no comment"
+            assert s.minimum is not None
+            assert s.maximum is not None
+            if s.scale != 1:
+                assert s.unit, f"{m.name}.{s.name} has no unit"
+            assert s.byte_order == "little_endian"
+
+
+def test_every_message_and_signal_is_in_the_interface_doc(db: Database) -> None:
+    doc = (ROOT / "docs" / "can-interface.md").read_text(encoding="utf-8")
+    for m in db.messages:
+        assert m.name in doc
+        assert f"0x{m.frame_id:03X}" in doc
+        for s in m.signals:
+            assert f"`{s.name}`" in doc, s.name
+
+
+def test_pitch_rate_sign_is_documented_in_the_dbc(db: Database) -> None:
+    comment = db.get_message_by_name(IMU_RATES).get_signal_by_name("PitchRate").comment
+    assert comment is not None
+    assert "NOSE RISES" in comment
+    assert "MINUS omega_y" in comment
+
+
+def test_a_broken_dbc_is_reported_with_its_path(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.dbc"
+    bad.write_text(
+        REPO_DBC.read_text().replace("SG_ PitchRate : 32|16", "SG_ PitchRate : 30|16")
+    )
+    with pytest.raises(InputDataError, match=r"bad\.dbc"):
+        load_database(bad)
+
+
+# --- E2E ------------------------------------------------------------------------------------
+
+
+def test_e2e_crc_matches_an_independent_j1850(db: Database) -> None:
+    m = db.get_message_by_name(IMU_RATES)
+    data = encode_protected(m, {"RollRate": 1.0, "PitchRate": -2.5, "YawRate": 10.0}, 7)
+    assert data[0] == _p01_crc(0x130, data)
+    assert data[1] & 0x0F == 7
+    # the helper itself: CRC-8/SAE-J1850 (init 0xFF, xorout 0xFF) has the check value 0x4B
+    assert _crc8_j1850(b"123456789", 0xFF) ^ 0xFF == 0x4B
+
+
+def test_a_corrupted_byte_or_wrong_message_fails_the_check(db: Database) -> None:
+    m = db.get_message_by_name(VEHICLE_SPEED)
+    data = encode_protected(m, {"VehicleSpeed": 50.0, "MovingDirection": 1}, 3)
+    assert check_protected(m, data)
+    for i in range(8):
+        for bit in (0x01, 0x80):
+            broken = bytearray(data)
+            broken[i] ^= bit
+            assert not check_protected(m, broken), (i, bit)
+    # the same bytes claimed by another message (different data ID) fail as well
+    assert not check_protected(db.get_message_by_name(WHEEL_SPEEDS), data)
+
+
+# --- the simulator's frames -----------------------------------------------------------------
+
+
+def _decode_all(db: Database, frames: list[can.Message], name: str) -> list[dict[str, object]]:
+    msg = db.get_message_by_name(name)
+    out = []
+    for f in frames:
+        if f.arbitration_id != msg.frame_id:
+            continue
+        assert check_protected(msg, f.data), f"{name}: bad CRC"
+        out.append(msg.decode(f.data, decode_choices=False))
+    return out
+
+
+def _assert_counters(decoded: list[dict[str, object]], signal: str) -> None:
+    counters = np.array([d[signal] for d in decoded])
+    assert counters.max() == E2E_COUNTER_MODULUS - 1
+    np.testing.assert_array_equal(np.diff(counters) % E2E_COUNTER_MODULUS, 1)
+    assert counters[0] == 0
+
+
+def test_imu_frames_decode_to_the_samples(db: Database, imu_samples: ImuSamples) -> None:
+    frames = imu_to_messages(imu_samples, db)
+    assert len(frames) == 2 * len(imu_samples)
+    assert all(f.channel == 0 and not f.is_extended_id and f.dlc == 8 for f in frames)
+    rates = _decode_all(db, frames, IMU_RATES)
+    accel = _decode_all(db, frames, IMU_ACCEL)
+    assert len(rates) == len(accel) == len(imu_samples)
+    got = np.array([[d["RollRate"], d["PitchRate"], d["YawRate"]] for d in rates], dtype=float)
+    want = imu_samples.rates_rad_s / DEG
+    assert np.abs(want).max() > 20  # real dynamics, not zeros
+    np.testing.assert_allclose(got, want, rtol=0, atol=0.005)  # one LSB
+    # nose-up pitch is positive on the bus: the sensor's y rate with its sign flipped
+    np.testing.assert_allclose(got[:, 1], -imu_samples.gyro_rad_s[:, 1] / DEG, atol=0.005)
+    got_a = np.array([[d["AccelX"], d["AccelY"], d["AccelZ"]] for d in accel], dtype=float)
+    np.testing.assert_allclose(got_a, imu_samples.accel_m_s2, rtol=0, atol=0.001)
+    _assert_counters(rates, "ImuRates_Counter")
+    _assert_counters(accel, "ImuAccel_Counter")
+    times = np.array([f.timestamp for f in frames[::2]])
+    np.testing.assert_allclose(times - DEFAULT_T0_UNIX_S, imu_samples.t_stamp_s, atol=1e-6)
+
+
+def test_speed_frames_decode_to_the_samples(db: Database, speed_samples: SpeedSamples) -> None:
+    frames = speed_to_messages(speed_samples, db)
+    speed = _decode_all(db, frames, VEHICLE_SPEED)
+    wheels = _decode_all(db, frames, WHEEL_SPEEDS)
+    assert len(speed) == len(wheels) == len(speed_samples)
+    kmh = np.array([d["VehicleSpeed"] for d in speed], dtype=float)
+    np.testing.assert_allclose(kmh, speed_samples.speed_m_s / KMH, rtol=0, atol=0.01)
+    assert [d["MovingDirection"] for d in speed] == list(speed_samples.direction)
+    assert {0, 1} <= set(speed_samples.direction.tolist())
+    got_w = np.array([[d[f"WheelSpeed{w}"] for w in ("FL", "FR", "RL", "RR")] for d in wheels],
+                     dtype=float)
+    np.testing.assert_allclose(got_w, speed_samples.wheel_speeds_m_s / KMH, rtol=0, atol=0.03125)
+    assert got_w.max() > 240
+    _assert_counters(speed, "VehicleSpeed_Counter")
+    _assert_counters(wheels, "WheelSpeeds_Counter")
+
+
+def test_out_of_range_values_are_clipped_and_nan_is_signal_not_available(db: Database) -> None:
+    m = db.get_message_by_name(IMU_RATES)
+    t = np.arange(3) * 0.01
+    gyro = np.array([[400 * DEG, 0, 0], [0, np.nan, 0], [-400 * DEG, 0, 0]])
+    frames = imu_to_messages(ImuMeasurements(t, gyro, np.zeros((3, 3))), db)
+    decoded = [m.decode(f.data) for f in frames if f.arbitration_id == m.frame_id]
+    assert decoded[0]["RollRate"] == pytest.approx(163.835)
+    assert decoded[2]["RollRate"] == pytest.approx(-163.835)
+    assert str(decoded[1]["PitchRate"]) == "SignalNotAvailable"
+
+
+def test_bus_merge_orders_and_spaces_frames(
+    db: Database, imu_samples: ImuSamples, speed_samples: SpeedSamples
+) -> None:
+    imu = imu_to_messages(imu_samples, db)
+    spd = speed_to_messages(speed_samples, db)
+    queued = {id(f): f.timestamp for f in imu + spd}
+    merged = merge_on_bus([imu, spd], bitrate=500_000)
+    assert len(merged) == len(imu) + len(spd)
+    t = np.array([f.timestamp for f in merged])
+    frame_s = 111 / 500_000
+    assert np.all(np.diff(t) >= frame_s - 1e-6)  # one frame at a time on the wire (float µs)
+    delay = np.array([f.timestamp - queued[id(f)] for f in merged])
+    assert delay.min() == pytest.approx(frame_s, abs=1e-6)
+    assert delay.max() < 5 * frame_s

@@ -1,0 +1,257 @@
+"""CAN log files: one set of frames through BLF, ASC and candump; damaged files; a real log."""
+
+from __future__ import annotations
+
+import gzip
+import logging
+import shutil
+from collections import defaultdict
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from roadpreview.canbus.logio import CanLogReader, read_can_log, write_can_log
+from roadpreview.errors import ConfigError, InputDataError
+from roadpreview.sim.canlog import write_drive_can
+from roadpreview.sim.imu import ImuConfig, simulate_imu
+
+T0 = 1735689600.0  # 2025-01-01T00:00:00Z
+#: timestamp resolution of each format as python-can writes it
+RESOLUTION = {".blf": 1e-9, ".asc": 1e-6, ".log": 1e-6, ".asc.gz": 1e-6, ".log.gz": 1e-6}
+
+
+def _frames(n: int = 400, seed: int = 0) -> list[can.Message]:
+    """Varied frames on channel 0: standard and extended IDs, DLC 0..8, irregular times."""
+    rng = np.random.default_rng(seed)
+    t = T0 + 12.3456789 + np.cumsum(rng.uniform(1e-5, 4e-3, n))
+    out = []
+    for k in range(n):
+        ext = k % 7 == 3
+        dlc = 8 if k % 5 else int(rng.integers(0, 9))
+        out.append(can.Message(
+            timestamp=float(t[k]),
+            arbitration_id=int(rng.integers(0, 0x1FFFFFFF if ext else 0x7FF)),
+            is_extended_id=ext,
+            dlc=dlc,
+            data=bytes(rng.integers(0, 256, dlc, dtype=np.uint8)),
+            channel=0,
+        ))
+    return out
+
+
+def _assert_same(got: list[can.Message], want: list[can.Message], tol: float) -> None:
+    assert len(got) == len(want)
+    for g, w in zip(got, want, strict=True):
+        assert (g.arbitration_id, g.is_extended_id, bytes(g.data)) == (
+            w.arbitration_id, w.is_extended_id, bytes(w.data))
+        assert g.timestamp == pytest.approx(w.timestamp, abs=tol)
+
+
+@pytest.mark.parametrize("suffix", [".blf", ".asc", ".log", ".asc.gz", ".log.gz"])
+def test_round_trip_through_each_format(tmp_path: Path, suffix: str) -> None:
+    frames = _frames()
+    path = tmp_path / f"drive{suffix}"
+    assert write_can_log(path, frames) == len(frames)
+    reader = CanLogReader(path, errors="raise")
+    got = list(reader)
+    _assert_same(got, frames, RESOLUTION[suffix] + 5e-7)  # + float64 spacing at 1.7e9 s
+    assert reader.problems == []
+    assert {m.channel for m in got} == {0}
+    if not suffix.endswith(".gz"):
+        # python-can's own LogReader sees the same (ASC: ask for absolute times)
+        plain = list(can.LogReader(path, relative_timestamp=False))
+        _assert_same(plain, frames, RESOLUTION[suffix] + 5e-7)
+
+
+def test_channel_numbering_in_each_format(tmp_path: Path) -> None:
+    frames = _frames(5)
+    write_can_log(tmp_path / "a.asc", frames)
+    write_can_log(tmp_path / "a.log", frames)
+    asc, log = (tmp_path / "a.asc").read_text(), (tmp_path / "a.log").read_text()
+    assert " 1  " in asc.splitlines()[5]  # ASC numbers channels from 1
+    assert log.splitlines()[0].split()[1] == "can0"
+
+
+def test_all_formats_agree_on_a_simulated_drive(tmp_path: Path) -> None:
+    t = np.arange(0.0, 2.0005, 0.001)
+    n = len(t)
+    omega = np.column_stack([np.zeros(n), 0.2 * np.sin(7 * t), np.zeros(n)])
+    imu = simulate_imu(t, omega, np.zeros((n, 3)), np.zeros((n, 3)), ImuConfig.automotive(),
+                       np.random.default_rng(1))
+    logs = {}
+    for suffix in (".blf", ".asc", ".log"):
+        write_drive_can(tmp_path / f"sim{suffix}", imu, None)
+        logs[suffix] = list(read_can_log(tmp_path / f"sim{suffix}", errors="raise"))
+    _assert_same(logs[".asc"], logs[".blf"], 1e-6)
+    _assert_same(logs[".log"], logs[".blf"], 1e-6)
+    assert len(logs[".blf"]) == 2 * len(imu)
+
+
+# --- damaged files ----------------------------------------------------------------------------
+
+
+def test_truncated_blf_keeps_frames_and_reports_the_file(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    frames = _frames(6000)
+    path = tmp_path / "cut.blf"
+    write_can_log(path, frames)
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) * 2 // 3])
+    with caplog.at_level(logging.WARNING, logger="roadpreview.canbus.logio"):
+        reader = CanLogReader(path)
+        got = list(reader)
+    assert 0.3 * len(frames) < len(got) < len(frames)
+    _assert_same(got, frames[: len(got)], 1e-9)
+    assert len(reader.problems) == 1
+    assert reader.problems[0].fatal
+    assert "truncated" in caplog.text
+    assert str(path) in caplog.text
+    # errors="raise": the same frames first, then the error naming the file
+    frames_then_error = read_can_log(path, errors="raise")
+    seen = [next(frames_then_error) for _ in range(len(got))]
+    _assert_same(seen, got, 0.0)
+    with pytest.raises(InputDataError, match=r"cut\.blf.*truncated"):
+        next(frames_then_error)
+
+
+def test_blf_of_a_logger_that_was_never_closed(tmp_path: Path) -> None:
+    frames = _frames(3000)
+    writer = can.BLFWriter(tmp_path / "live.blf")
+    for m in frames:
+        writer.on_message_received(m)
+    writer.file.flush()
+    shutil.copy(tmp_path / "live.blf", tmp_path / "crash.blf")  # what a power cut leaves
+    writer.stop()
+    reader = CanLogReader(tmp_path / "crash.blf")
+    got = list(reader)
+    assert 0 < len(got) < len(frames)
+    # the header (with the start date) is only written on close: times are relative
+    start = int(frames[0].timestamp * 1000) / 1000
+    for m in frames:
+        m.timestamp -= start
+    _assert_same(got, frames[: len(got)], 1e-6)
+    assert len(reader.problems) == 1
+    assert "never finalised" in reader.problems[0].reason
+    assert "relative" in reader.problems[0].reason
+
+
+def _insert(lines: list[str], at: dict[int, str]) -> list[str]:
+    """Insert text lines so that each lands on the given 1-based line number."""
+    out = list(lines)
+    for line_no in sorted(at):
+        out.insert(line_no - 1, at[line_no] + "\n")
+    return out
+
+
+@pytest.mark.parametrize(("suffix", "garbage"), [
+    (".log", {40: "(1735689612.5) can0 12G#0011", 41: "complete nonsense",
+              90: "(17356896xx.5) can0 123#00"}),
+    (".asc", {40: " 0.500000 1  12G             Rx   d 8 00 00 00 00 00 00 00 00",
+              41: " 0.500100 1  123             Rx   d 8 00 00 ZZ 00 00 00 00 00",
+              60: "complete nonsense",  # not frame-like: ASC readers skip such events
+              90: " 0.600000 1  123             Rx   d"}),
+])
+def test_garbage_lines_are_skipped_and_frames_after_them_kept(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, suffix: str, garbage: dict[int, str]
+) -> None:
+    frames = _frames()
+    clean = tmp_path / f"clean{suffix}"
+    write_can_log(clean, frames)
+    path = tmp_path / f"garbled{suffix}"
+    path.write_text("".join(_insert(clean.read_text().splitlines(True), garbage)))
+    with caplog.at_level(logging.WARNING, logger="roadpreview.canbus.logio"):
+        reader = CanLogReader(path)
+        got = list(reader)
+    _assert_same(got, frames, 1e-6)  # nothing lost, nothing invented
+    bad_lines = [p.line for p in reader.problems]
+    expected = [40, 41, 90]
+    assert bad_lines == expected
+    for line_no in expected:
+        assert f"{path}:{line_no}:" in caplog.text
+    with pytest.raises(InputDataError, match=rf"garbled\{suffix}:40:"):
+        list(read_can_log(path, errors="raise"))
+
+
+def test_truncated_gzip_log_keeps_the_frames_before_the_cut(tmp_path: Path) -> None:
+    frames = _frames(3000)
+    path = tmp_path / "cut.log.gz"
+    write_can_log(path, frames)
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    reader = CanLogReader(path)
+    got = list(reader)
+    assert 0 < len(got) < len(frames)
+    _assert_same(got, frames[: len(got)], 1e-6)
+    assert reader.problems
+    assert reader.problems[-1].fatal
+
+
+def test_a_text_file_that_is_no_blf(tmp_path: Path) -> None:
+    path = tmp_path / "fake.blf"
+    path.write_text("this is not a BLF file at all, not even close to one" * 5)
+    reader = CanLogReader(path)
+    assert list(reader) == []
+    assert reader.problems[0].fatal
+    assert "fake.blf" in str(reader.problems[0])
+
+
+# --- writer checks ------------------------------------------------------------------------------
+
+
+def test_writer_refuses_frames_out_of_order_and_leaves_no_file(tmp_path: Path) -> None:
+    frames = _frames(10)
+    frames[5].timestamp = frames[3].timestamp
+    path = tmp_path / "bad.asc"
+    with pytest.raises(InputDataError, match="message 5"):
+        write_can_log(path, frames)
+    assert not path.exists()
+
+
+def test_blf_needs_unix_times(tmp_path: Path) -> None:
+    frames = [can.Message(timestamp=0.5 + k * 0.01, arbitration_id=0x130, data=bytes(8))
+              for k in range(3)]
+    with pytest.raises(InputDataError, match="Unix time"):
+        write_can_log(tmp_path / "rel.blf", frames)
+    write_can_log(tmp_path / "rel.log", frames)  # text formats store any time
+    assert [m.timestamp for m in read_can_log(tmp_path / "rel.log")] == [0.5, 0.51, 0.52]
+
+
+@pytest.mark.parametrize("name", ["x.txt", "x.blf.gz", "x", "x.trc"])
+def test_unknown_suffixes(tmp_path: Path, name: str) -> None:
+    with pytest.raises(ConfigError, match="unknown CAN log format"):
+        write_can_log(tmp_path / name, _frames(2))
+    (tmp_path / name).write_bytes(b"")
+    with pytest.raises(InputDataError, match="unknown CAN log format"):
+        read_can_log(tmp_path / name)
+
+
+def test_missing_log(tmp_path: Path) -> None:
+    with pytest.raises(InputDataError, match="not found"):
+        read_can_log(tmp_path / "nothing.log")
+
+
+# --- real data ----------------------------------------------------------------------------------
+
+
+@pytest.mark.shared
+def test_real_comma_candump_log(comma_dir: Path) -> None:
+    path = comma_dir / "derived" / "raw_can.candump.log"
+    reader = CanLogReader(path, errors="raise")
+    last: dict[object, float] = defaultdict(lambda: -np.inf)
+    count: dict[object, int] = defaultdict(int)
+    for m in reader:
+        assert m.timestamp >= last[m.channel], (m.channel, m.timestamp)
+        last[m.channel] = m.timestamp
+        count[m.channel] += 1
+    assert sum(count.values()) == 135_468
+    assert dict(count) == {0: 53_800, 1: 45_000, 128: 12_434, 129: 24_234}
+    assert reader.problems == []
+
+
+def test_gzip_text_is_really_gzip(tmp_path: Path) -> None:
+    write_can_log(tmp_path / "a.log.gz", _frames(3))
+    with gzip.open(tmp_path / "a.log.gz", "rt") as f:
+        assert f.readline().startswith("(")
