@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 
 import numpy as np
 import pytest
@@ -293,19 +292,6 @@ def test_pose_sample_and_body_points_follow_the_sign_conventions() -> None:
     assert half.accel_world.shape == (t.size - 1, 3)
     with pytest.raises(InputDataError, match="times"):
         body.sample([5.0])
-
-
-def test_sixty_second_drive_at_1_khz_is_fast() -> None:
-    road = generate_road(RoadConfig(length_m=1100.0), np.random.default_rng(0))
-    t = np.arange(0.0, 60.0, DT)
-    v = np.full(t.size, 50 / 3.6)
-    args = (VehicleParams(), road, t, 30.0 + v * t, v, np.zeros(t.size), 0.0)
-    best = math.inf
-    for _ in range(2):
-        start = time.perf_counter()
-        simulate_vehicle(*args)
-        best = min(best, time.perf_counter() - start)
-    assert best < 1.0
 
 
 def test_vehicle_config_errors_name_the_field() -> None:
