@@ -11,6 +11,7 @@ import importlib
 #: benchmark name -> module
 BENCHMARKS: dict[str, str] = {
     "pitch": "roadpreview.bench.pitch",
+    "sim": "roadpreview.bench.sim",
 }
 
 

@@ -64,7 +64,8 @@ class Conditions:
 
     ``fog_density_per_m``: extinction coefficient of Koschmieder's law,
     contrast falls as exp(-k d) with distance d (0 = clear).
-    ``light``: scene illumination factor (1 = day, about 0.05 = night).
+    ``light``: scene illumination, a fraction of daylight (1 = day, about 0.05 = dusk with
+    auto exposure, about 0.001 = street-lit night, where background texture is gone).
     ``tunnel``: inside a tunnel (dark walls and ceiling, artificial light).
     """
 
