@@ -17,6 +17,7 @@ from dataclasses import replace
 import numpy as np
 
 from roadpreview.errors import ConfigError
+from roadpreview.sim.imu import ImuConfig
 from roadpreview.sim.motion import GapKnot, LeadEvent, MotionConfig, SpeedKnot
 from roadpreview.sim.road import Anomaly, RoadConfig, paper_speed_bump
 from roadpreview.sim.scenario import CameraSpec, ConditionSegment, ScenarioConfig
@@ -110,7 +111,9 @@ def wild(seed: int = 0, *, duration_s: float = 60.0) -> ScenarioConfig:
             break
         except ConfigError:
             motion = replace(motion, lead_events=motion.lead_events[:-1])
-    return ScenarioConfig(name="wild", seed=seed, motion=motion)
+    # a smartphone-grade IMU whose clock is off by an unknown 0-80 ms (CAN / app latency)
+    imu = replace(ImuConfig.smartphone(), time_offset_s=round(float(rng.uniform(0.0, 0.08)), 4))
+    return ScenarioConfig(name="wild", seed=seed, motion=motion, imu_preset="custom", imu=imu)
 
 
 def texture_loss(seed: int = 0, *, duration_s: float = 60.0) -> ScenarioConfig:
