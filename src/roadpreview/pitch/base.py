@@ -109,6 +109,8 @@ def validate_correspondences(
         raise InputDataError(
             f"x_ref and x_cur must have the same shape, got {a.shape} and {b.shape}"
         )
+    if np.isfinite(a).all() and np.isfinite(b).all():  # the usual case: nothing to drop
+        return a, b, 0
     finite = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
     n_invalid = int(a.shape[0] - np.count_nonzero(finite))
     if n_invalid:

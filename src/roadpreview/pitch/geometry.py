@@ -12,6 +12,8 @@ Sampson error comes out in pixels without forming F explicitly.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -217,21 +219,20 @@ class PitchOnlySampson:
         self.P = (u * cur_T[None]).sum(axis=1)  # (3, N): r = [1, c, s] @ P
         scale = np.array([1.0 / fx, 1.0 / fy])[None, :, None]
         ab = np.concatenate([u[:, :2] * scale, v[:, :2] * scale], axis=1)  # (3, 4, N)
-        pairs = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
-        # the six distinct entries of the Gram matrix of the three line terms
-        self.Q = np.stack([(ab[i] * ab[j]).sum(axis=0) for i, j in pairs])  # (6, N)
+        # the six distinct entries of the Gram matrix of the three line terms: (6, N)
+        q = np.einsum("ikn,jkn->ijn", ab, ab)
+        self.Q = np.stack([q[0, 0], q[0, 1], q[0, 2], q[1, 1], q[1, 2], q[2, 2]])
+        # rows: value and derivative with respect to φ; filled in by _bases
+        self._mp = np.zeros((2, 3))
+        self._mq = np.zeros((2, 6))
+        self._mp[0, 0] = self._mq[0, 0] = 1.0
 
-    @staticmethod
-    def _bases(phi: float) -> tuple[Array, Array]:
-        c, s = float(np.cos(phi)), float(np.sin(phi))
-        # rows: value, derivative with respect to φ
-        mp = np.array([[1.0, c, s], [0.0, -s, c]])
-        mq = np.array(
-            [
-                [1.0, 2.0 * c, 2.0 * s, c * c, 2.0 * c * s, s * s],
-                [0.0, -2.0 * s, 2.0 * c, -2.0 * c * s, 2.0 * (c * c - s * s), 2.0 * s * c],
-            ]
-        )
+    def _bases(self, phi: float) -> tuple[Array, Array]:
+        c, s = math.cos(phi), math.sin(phi)
+        mp, mq = self._mp, self._mq
+        mp[0, 1], mp[0, 2], mp[1, 1], mp[1, 2] = c, s, -s, c
+        mq[0, 1:] = (2.0 * c, 2.0 * s, c * c, 2.0 * c * s, s * s)
+        mq[1, 1:] = (-2.0 * s, 2.0 * c, -2.0 * c * s, 2.0 * (c * c - s * s), 2.0 * s * c)
         return mp, mq
 
     def __call__(self, phi: float) -> tuple[Array, Array]:

@@ -176,6 +176,25 @@ class _RotationModel:
         return sampson_distance_and_jacobian(theta, *self._args)[0]
 
 
+def _median_abs(x: Array) -> float:
+    """median(|x|) through one partition (np.median's overhead is large at N ~ 1000)."""
+    a = np.abs(x)
+    k = a.size // 2
+    if a.size % 2:
+        return float(np.partition(a, k)[k])
+    part = np.partition(a, (k - 1, k))
+    return 0.5 * float(part[k - 1] + part[k])
+
+
+def _limit(delta: Array, max_step: float) -> tuple[Array, float]:
+    """Clip a step to the trust region; also return its largest component."""
+    if delta.size == 1:
+        d = min(max(float(delta[0]), -max_step), max_step)
+        return np.array([d]), abs(d)
+    delta = np.clip(delta, -max_step, max_step)
+    return delta, float(np.max(np.abs(delta)))
+
+
 def _solve(A: Array, b: Array) -> Array:
     """``A^{-1} b`` for the tiny (k <= 3) normal equations; scalar fast path for k = 1."""
     if A.shape == (1, 1):
@@ -260,7 +279,9 @@ class RobustPitchEstimator:
         H, grad = self._normal_equations(g, J)
         return not (H[0, 0] > 0.0 and abs(grad[0] / H[0, 0]) < self.config.vote_step_rad)
 
-    def _vote(self, model: _Model, theta: Array, g: Array, J: Array) -> tuple[Array, Array, Array]:
+    def _vote(
+        self, model: _Model, theta: Array, g: Array, J: Array, cost: float
+    ) -> tuple[Array, Array, Array]:
         """A one-point vote for the start: each correspondence alone, linearised at
         ``theta``, fixes φ_i = φ - g_i / g'_i; the |g'|-weighted median of these is a
         robust start (a Hough vote in one dimension, one evaluation of the model)."""
@@ -278,7 +299,7 @@ class RobustPitchEstimator:
         )
         new_theta = theta + step
         g_new, J_new = model(new_theta)
-        if self._cost(g_new) < self._cost(g):
+        if self._cost(g_new) < cost:
             return new_theta, g_new, J_new
         return theta, g, J
 
@@ -292,7 +313,7 @@ class RobustPitchEstimator:
         """IRLS with Tukey's biweight, started at the Cauchy optimum (a redescending
         M-estimator needs a good start, which the Cauchy fit provides)."""
         cfg = self.config
-        c = max(1.4826 * float(np.median(np.abs(g))), 0.05) * cfg.polish_tukey_c
+        c = max(1.4826 * _median_abs(g), 0.05) * cfg.polish_tukey_c
         steps = 0
         while steps < cfg.polish_iterations:  # iterations, not points
             steps += 1
@@ -302,10 +323,10 @@ class RobustPitchEstimator:
                 delta = -_solve(J.T @ Jw, Jw.T @ g)
             except np.linalg.LinAlgError:
                 break
-            delta = np.clip(delta, -cfg.max_step_rad, cfg.max_step_rad)
+            delta, step = _limit(delta, cfg.max_step_rad)
             theta = theta + delta
             g, J = model(theta)
-            if float(np.max(np.abs(delta))) < 10.0 * cfg.step_tolerance_rad:
+            if step < 10.0 * cfg.step_tolerance_rad:
                 break
         return theta, g, J, c, steps
 
@@ -340,7 +361,7 @@ class RobustPitchEstimator:
             theta[: min(self._k, init.size)] = init[: self._k]
 
         g, J = model(theta)
-        if not (np.all(np.isfinite(g)) and np.all(np.isfinite(J))):
+        if not math.isfinite(float(np.dot(g, g)) + float(J.sum())):
             return PitchEstimate.failed(
                 "degenerate geometry: a correspondence lies on the epipole (zero epipolar line)",
                 n_points=n,
@@ -348,7 +369,7 @@ class RobustPitchEstimator:
             )
         it = 0
         if self._k == 1 and cfg.vote and cfg.loss == "cauchy" and self._start_is_poor(g, J):
-            theta, g, J = self._vote(model, theta, g, J)
+            theta, g, J = self._vote(model, theta, g, J, self._cost(g))
             it = 1
         cost = self._cost(g)
         lam = cfg.initial_damping
@@ -356,7 +377,7 @@ class RobustPitchEstimator:
         while it < cfg.max_iterations:  # iterations, not points
             it += 1
             H, grad = self._normal_equations(g, J)
-            diag = np.diag(np.maximum(np.diag(H), 1e-12))
+            diag = np.diag(np.maximum(np.diag(H), 1e-12)) if self._k > 1 else np.maximum(H, 1e-12)
             accepted = False
             small_step = False
             while lam < 1e10:
@@ -365,8 +386,8 @@ class RobustPitchEstimator:
                 except np.linalg.LinAlgError:
                     lam *= 10.0
                     continue
-                delta = np.clip(delta, -cfg.max_step_rad, cfg.max_step_rad)
-                small_step = float(np.max(np.abs(delta))) < cfg.step_tolerance_rad
+                delta, step = _limit(delta, cfg.max_step_rad)
+                small_step = step < cfg.step_tolerance_rad
                 theta_new = theta + delta
                 g_new, J_new = model(theta_new)
                 cost_new = self._cost(g_new)
@@ -424,7 +445,7 @@ class RobustPitchEstimator:
                 n_invalid=n_invalid,
             )
         g_in = g[inliers] if n_in >= 3 else g
-        noise = max(1.4826 * float(np.median(np.abs(g_in))), 1e-3)
+        noise = max(1.4826 * _median_abs(g_in), 1e-3)
         try:
             H_inv = np.linalg.inv(H)
         except np.linalg.LinAlgError:
