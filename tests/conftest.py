@@ -34,3 +34,44 @@ def comma_dir() -> Path:
 def yolox_model() -> Path:
     """The real YOLOX-nano COCO detector (../shared/models/yolox_nano.onnx)."""
     return _shared("models", "yolox_nano.onnx")
+
+
+@pytest.fixture(scope="session")
+def make_recording(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+    """Factory for simulated recordings, cached per session by their parameters.
+
+    ``make_recording("demo", seed=0, duration_s=6.0, width=640, height=360, masks=False,
+    video=True)`` returns an opened `roadpreview.sim.recording.Recording`. Keep
+    drives short: rendering costs about 15-30 ms per frame at 640x360-1280x720.
+    """
+    from dataclasses import replace
+
+    from roadpreview.sim.dataset import drive_config
+    from roadpreview.sim.recording import Recording, write_recording
+
+    root = tmp_path_factory.mktemp("recordings")
+    cache: dict[tuple[object, ...], Recording] = {}
+
+    def make(
+        preset: str = "demo",
+        *,
+        seed: int = 0,
+        duration_s: float | None = None,
+        width: int | None = 640,
+        height: int | None = 360,
+        masks: bool = False,
+        video: bool = True,
+        **scenario_overrides: object,
+    ) -> Recording:
+        key = (preset, seed, duration_s, width, height, masks, video,
+               tuple(sorted(scenario_overrides.items())))
+        if key not in cache:
+            cfg = drive_config(preset, seed, duration_s=duration_s, width=width, height=height)
+            cfg = replace(cfg, output=replace(cfg.output, masks=masks, video=video),
+                          **scenario_overrides)  # type: ignore[arg-type]
+            folder = root / f"rec{len(cache):03d}_{preset}_{seed}"
+            write_recording(cfg, folder)
+            cache[key] = Recording.open(folder)
+        return cache[key]
+
+    return make
