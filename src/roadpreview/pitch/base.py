@@ -117,3 +117,19 @@ def validate_correspondences(
         a = a[finite]
         b = b[finite]
     return a, b, n_invalid
+
+
+def too_few(n: int, minimum: int, n_invalid: int) -> PitchEstimate | None:
+    """The falsy result for fewer than ``minimum`` valid pairs, else None."""
+    if n >= minimum:
+        return None
+    return PitchEstimate.failed(
+        f"too few correspondences: {n} valid < {minimum}", n_points=n, n_invalid=n_invalid
+    )
+
+
+def poor_fit_reason(inlier_ratio: float, minimum: float) -> str:
+    """The reason of a fit whose inlier ratio is below ``minimum`` ("" when it is not)."""
+    if inlier_ratio >= minimum:
+        return ""
+    return f"poor fit: inlier ratio {inlier_ratio:.2f} < {minimum:.2f}"

@@ -17,7 +17,12 @@ from numpy.typing import ArrayLike
 
 from roadpreview.camera import CameraModel
 from roadpreview.configtools import check_ranges, param
-from roadpreview.pitch.base import PitchEstimate, validate_correspondences
+from roadpreview.pitch.base import (
+    PitchEstimate,
+    poor_fit_reason,
+    too_few,
+    validate_correspondences,
+)
 
 _METHODS = {
     "ransac": cv2.RANSAC,
@@ -68,12 +73,8 @@ class EssentialMatrixPitchEstimator:
         cfg = self.config
         a, b, n_invalid = validate_correspondences(x_ref, x_cur)
         n = a.shape[0]
-        if n < cfg.min_correspondences:
-            return PitchEstimate.failed(
-                f"too few correspondences: {n} valid < {cfg.min_correspondences}",
-                n_points=n,
-                n_invalid=n_invalid,
-            )
+        if (failed := too_few(n, cfg.min_correspondences, n_invalid)) is not None:
+            return failed
         K = self.camera.K
         E, mask = cv2.findEssentialMat(
             a,
@@ -115,9 +116,7 @@ class EssentialMatrixPitchEstimator:
             iterations=0,
             converged=True,
             n_points=n,
-            reason=""
-            if inlier_ratio >= cfg.min_inlier_ratio
-            else (f"poor fit: inlier ratio {inlier_ratio:.2f} < {cfg.min_inlier_ratio:.2f}"),
+            reason=poor_fit_reason(inlier_ratio, cfg.min_inlier_ratio),
             yaw=yaw,
             roll=roll,
             n_invalid=n_invalid,

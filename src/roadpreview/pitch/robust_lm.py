@@ -32,7 +32,12 @@ from numpy.typing import ArrayLike, NDArray
 from roadpreview.camera import CameraModel
 from roadpreview.configtools import check_ranges, param
 from roadpreview.errors import ConfigError
-from roadpreview.pitch.base import PitchEstimate, validate_correspondences
+from roadpreview.pitch.base import (
+    PitchEstimate,
+    poor_fit_reason,
+    too_few,
+    validate_correspondences,
+)
 from roadpreview.pitch.geometry import (
     PitchOnlySampson,
     normalise,
@@ -343,12 +348,8 @@ class RobustPitchEstimator:
         cfg = self.config
         a, b, n_invalid = validate_correspondences(x_ref, x_cur)
         n = a.shape[0]
-        if n < cfg.min_correspondences:
-            return PitchEstimate.failed(
-                f"too few correspondences: {n} valid < {cfg.min_correspondences}",
-                n_points=n,
-                n_invalid=n_invalid,
-            )
+        if (failed := too_few(n, cfg.min_correspondences, n_invalid)) is not None:
+            return failed
         cam = self.camera
         K = cam.K
         model_cls = _PitchModel if self._k == 1 else _RotationModel
@@ -458,9 +459,7 @@ class RobustPitchEstimator:
         meat = (J.T @ (J * (w * w)[:, None])) * noise**2
         cov = H_inv @ meat @ H_inv
         std = math.sqrt(max(float(cov[0, 0]), 0.0))
-        reason = ""
-        if inlier_ratio < cfg.min_inlier_ratio:
-            reason = f"poor fit: inlier ratio {inlier_ratio:.2f} < {cfg.min_inlier_ratio:.2f}"
+        reason = poor_fit_reason(inlier_ratio, cfg.min_inlier_ratio)
         result = PitchEstimate(
             phi=float(theta[0]),
             std=std,
