@@ -16,6 +16,8 @@ from roadpreview.canbus.dbc import (
     IMU_ACCEL,
     IMU_RATES,
     RESERVED_OUTPUT_IDS,
+    RP_ALERT,
+    RP_STATUS,
     VEHICLE_SPEED,
     WHEEL_SPEEDS,
     check_protected,
@@ -103,17 +105,22 @@ def test_loads_strict_with_cantools(db: Database) -> None:
 
 
 def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> None:
-    names = {IMU_RATES: 0x130, IMU_ACCEL: 0x131, VEHICLE_SPEED: 0x140, WHEEL_SPEEDS: 0x141}
-    assert {m.name: m.frame_id for m in db.messages} == names
+    inputs = {IMU_RATES: 0x130, IMU_ACCEL: 0x131, VEHICLE_SPEED: 0x140, WHEEL_SPEEDS: 0x141}
+    outputs = {RP_ALERT: 0x200, RP_STATUS: 0x201}
+    assert {m.name: m.frame_id for m in db.messages} == inputs | outputs
     for m in db.messages:
         assert not m.is_extended_frame
         assert m.frame_id < 0x800
-        assert 0x130 <= m.frame_id <= 0x14F
-        assert m.frame_id not in RESERVED_OUTPUT_IDS
+        if m.name in inputs:
+            assert 0x130 <= m.frame_id <= 0x14F
+            assert m.frame_id not in RESERVED_OUTPUT_IDS
+            assert m.cycle_time in (10, 20)
+            assert m.senders in (["IMU"], ["ESC"])
+        else:  # only roadpreview's outputs live in the reserved range
+            assert m.frame_id in RESERVED_OUTPUT_IDS
+            assert m.senders == ["ROADPREVIEW"]
         assert m.length == 8
-        assert m.cycle_time in (10, 20)
         assert m.comment
-        assert m.senders
         layout = e2e_layout(m)
         assert layout.data_id == m.frame_id
         for s in m.signals:
@@ -123,6 +130,8 @@ def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> Non
             if s.scale != 1:
                 assert s.unit, f"{m.name}.{s.name} has no unit"
             assert s.byte_order == "little_endian"
+    assert db.get_message_by_name(RP_STATUS).cycle_time == 100
+    assert db.get_message_by_name(RP_ALERT).send_type == "Event"
 
 
 def test_every_message_and_signal_is_in_the_interface_doc(db: Database) -> None:

@@ -19,7 +19,9 @@ from roadpreview.sim.imu import ImuConfig, simulate_imu
 
 T0 = 1735689600.0  # 2025-01-01T00:00:00Z
 #: timestamp resolution of each format as python-can writes it
-RESOLUTION = {".blf": 1e-9, ".asc": 1e-6, ".log": 1e-6, ".asc.gz": 1e-6, ".log.gz": 1e-6}
+RESOLUTION = {".blf": 1e-9, ".asc": 1e-6, ".log": 1e-6, ".asc.gz": 1e-6, ".log.gz": 1e-6,
+              ".trc": 2e-6, ".trc.gz": 2e-6, ".csv": 0.0, ".csv.gz": 0.0}  # TRC: ms + day count
+ALL_SUFFIXES = [".blf", ".asc", ".log", ".trc", ".csv", ".asc.gz", ".log.gz", ".trc.gz", ".csv.gz"]
 
 
 def _frames(n: int = 400, seed: int = 0) -> list[can.Message]:
@@ -49,7 +51,7 @@ def _assert_same(got: list[can.Message], want: list[can.Message], tol: float) ->
         assert g.timestamp == pytest.approx(w.timestamp, abs=tol)
 
 
-@pytest.mark.parametrize("suffix", [".blf", ".asc", ".log", ".asc.gz", ".log.gz"])
+@pytest.mark.parametrize("suffix", ALL_SUFFIXES)
 def test_round_trip_through_each_format(tmp_path: Path, suffix: str) -> None:
     frames = _frames()
     path = tmp_path / f"drive{suffix}"
@@ -58,7 +60,8 @@ def test_round_trip_through_each_format(tmp_path: Path, suffix: str) -> None:
     got = list(reader)
     _assert_same(got, frames, RESOLUTION[suffix] + 5e-7)  # + float64 spacing at 1.7e9 s
     assert reader.problems == []
-    assert {m.channel for m in got} == {0}
+    # CSV has no channel column
+    assert {m.channel for m in got} == ({None} if suffix.startswith(".csv") else {0})
     if not suffix.endswith(".gz"):
         # python-can's own LogReader sees the same (ASC: ask for absolute times)
         plain = list(can.LogReader(path, relative_timestamp=False))
@@ -153,6 +156,12 @@ def _insert(lines: list[str], at: dict[int, str]) -> list[str]:
               41: " 0.500100 1  123             Rx   d 8 00 00 ZZ 00 00 00 00 00",
               60: "complete nonsense",  # not frame-like: ASC readers skip such events
               90: " 0.600000 1  123             Rx   d"}),
+    (".trc", {40: "      7      5.000 DT  1     012G Rx -  8    00 00 00 00 00 00 00 00",
+              41: "complete nonsense",
+              90: "      9      6.000 DT"}),
+    (".csv", {40: "1735689612.5,0x12G,0,0,0,8,AAAAAAAAAAA=",
+              41: "complete nonsense",
+              90: "1735689612.6,0x123,0,0,0,8"}),
 ])
 def test_garbage_lines_are_skipped_and_frames_after_them_kept(
     tmp_path: Path, caplog: pytest.LogCaptureFixture, suffix: str, garbage: dict[int, str]
@@ -219,7 +228,7 @@ def test_blf_needs_unix_times(tmp_path: Path) -> None:
     assert [m.timestamp for m in read_can_log(tmp_path / "rel.log")] == [0.5, 0.51, 0.52]
 
 
-@pytest.mark.parametrize("name", ["x.txt", "x.blf.gz", "x", "x.trc"])
+@pytest.mark.parametrize("name", ["x.txt", "x.blf.gz", "x", "x.mf4", "x.db"])
 def test_unknown_suffixes(tmp_path: Path, name: str) -> None:
     with pytest.raises(ConfigError, match="unknown CAN log format"):
         write_can_log(tmp_path / name, _frames(2))

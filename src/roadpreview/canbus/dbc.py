@@ -5,8 +5,12 @@ repository's ``data/roadpreview.dbc`` is a symlink to it) and is loaded with
 cantools in strict mode. Every input message carries an AUTOSAR E2E profile 1
 header: byte 0 is a CRC-8 SAE J1850 over the message's E2E data ID (DBC
 attribute ``E2E_DataID``) and bytes 1..7, bits 8..11 an alive counter that
-runs 0..14. The CRC comes from the ``autosar-e2e`` package. Messages and
-signals are documented in ``docs/can-interface.md``.
+runs 0..14; so do the outputs ``RP_ALERT`` and ``RP_STATUS``
+(`roadpreview.canbus.output`). The CRC comes from the ``autosar-e2e``
+package. Messages and signals are documented in ``docs/can-interface.md``.
+
+Other cars' DBCs (opendbc) load with ``load_database(path, strict=False)``:
+they often have overlapping or placeholder signals that strict mode refuses.
 """
 
 from __future__ import annotations
@@ -33,6 +37,8 @@ IMU_RATES = "IMU_RATES"
 IMU_ACCEL = "IMU_ACCEL"
 VEHICLE_SPEED = "VEHICLE_SPEED"
 WHEEL_SPEEDS = "WHEEL_SPEEDS"
+RP_ALERT = "RP_ALERT"
+RP_STATUS = "RP_STATUS"
 
 #: 11-bit identifiers reserved for roadpreview's own output messages (alert, status)
 RESERVED_OUTPUT_IDS = range(0x200, 0x210)
@@ -60,25 +66,38 @@ def _packaged_database() -> Database:
     try:
         db = cantools.database.load_string(dbc_text(), database_format="dbc", strict=True)
     except (cantools.database.UnsupportedDatabaseFormatError, ValueError) as exc:
-        raise InputDataError(f"{name}: not a valid DBC ({exc})") from None
+        raise _dbc_error(name, exc) from None
     assert isinstance(db, Database)
     return db
 
 
-def load_database(path: str | Path | None = None) -> Database:
-    """Load a DBC strictly (overlapping signals, bad lengths are errors).
+def _dbc_error(path: object, exc: Exception) -> InputDataError:
+    """An error naming the file, and the line and column of a syntax error."""
+    cause = exc.__cause__ or exc.__context__
+    line = getattr(cause, "line", None)
+    column = getattr(cause, "column", None)
+    if isinstance(line, int):
+        where = f"{path}:{line}" + (f":{column}" if isinstance(column, int) else "")
+        return InputDataError(f"{where}: DBC syntax error ({exc})")
+    return InputDataError(f"{path}: not a valid DBC ({exc})")
+
+
+def load_database(path: str | Path | None = None, *, strict: bool = True) -> Database:
+    """Load a DBC, by default strictly (overlapping signals, bad lengths are errors).
 
     ``path=None`` gives the packaged ``roadpreview.dbc`` (loaded once and
-    cached; treat it as read-only). Raises `InputDataError` naming the file.
+    cached; treat it as read-only; always strict). ``strict=False`` is for
+    foreign DBCs such as opendbc's. Raises `InputDataError` naming the file,
+    and for a syntax error the line and column.
     """
     if path is None:
         return _packaged_database()
     try:
-        db = cantools.database.load_file(path, database_format="dbc", strict=True)
+        db = cantools.database.load_file(path, database_format="dbc", strict=strict)
     except FileNotFoundError:
         raise InputDataError(f"{path}: DBC file not found") from None
     except (cantools.database.UnsupportedDatabaseFormatError, ValueError, OSError) as exc:
-        raise InputDataError(f"{path}: not a valid DBC ({exc})") from None
+        raise _dbc_error(path, exc) from None
     if not isinstance(db, Database):
         raise InputDataError(f"{path}: not a CAN database")
     return db

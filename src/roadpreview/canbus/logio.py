@@ -1,8 +1,10 @@
-"""Write and read CAN log files (Vector BLF and ASC, candump ``-L`` .log) with python-can.
+"""Write and read CAN log files (Vector BLF and ASC, candump ``-L`` .log, PEAK TRC, CSV).
 
-The format follows the file suffix: ``.blf``, ``.asc``, ``.log`` and, for the
-text formats, their gzip variants ``.asc.gz`` and ``.log.gz`` (python-can
-cannot gzip BLF, which is compressed already).
+The format follows the file suffix: ``.blf``, ``.asc``, ``.log``, ``.trc``,
+``.csv`` and, for the text formats, their gzip variants (``.asc.gz``,
+``.log.gz``, ``.trc.gz``, ``.csv.gz``; python-can cannot gzip BLF, which is
+compressed already). These are the formats ``can.LogReader`` reads; MF4 and
+SQLite are left out (MF4 needs asammdf, SQLite is no logger's format).
 
 Writing goes through ``can.Logger``. Reading uses python-can's own readers
 (the ones ``can.LogReader`` picks by suffix) but never dies on bad data: **a
@@ -22,6 +24,10 @@ Timestamps are what the logger stored, in seconds (normally Unix time):
 * BLF: start of measurement as a calendar date (1 ms, UTC) plus offsets in
   ns; python-can takes timestamps before 1990 for "not a date" and drops
   the start, so `write_can_log` refuses them for BLF.
+* TRC (version 2.1 as python-can writes it): start as a day count, offsets
+  in ms with 3 decimals; about 1 µs.
+* CSV (python-can's layout: time, hex ID, flags, DLC, base64 data): the full
+  float, exact. It has no channel column: channels read back as None.
 * ASC: the start of measurement as a *local-time* calendar date (1 ms)
   plus offsets in µs. We start the measurement on the whole second before
   the first frame (as CANoe does, the first frame need not be at 0), so the
@@ -29,10 +35,11 @@ Timestamps are what the logger stored, in seconds (normally Unix time):
   (``relative_timestamp=False``); both ends must use the same time zone.
   python-can's own ASC reader defaults to times relative to the start.
 
-Channels: the simulator writes channel 0, which ASC and BLF store as channel
-1 (their numbering starts at 1) and candump as ``can0``. `read_can_log`
-turns every one of these back into the integer 0 (``canN``/``vcanN`` -> N),
-so one bus has one channel number whatever the format.
+Channels: the simulator writes channel 0, which ASC, BLF and TRC store as
+channel 1 (their numbering starts at 1) and candump as ``can0``.
+`read_can_log` turns every one of these back into the integer 0
+(``canN``/``vcanN`` -> N), so one bus has one channel number whatever the
+format.
 """
 
 from __future__ import annotations
@@ -44,7 +51,7 @@ import os
 import re
 import struct
 import zlib
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
@@ -59,7 +66,18 @@ from roadpreview.errors import ConfigError, InputDataError
 log = logging.getLogger(__name__)
 
 #: suffixes `write_can_log` and `read_can_log` understand
-LOG_SUFFIXES = (".blf", ".asc", ".log", ".asc.gz", ".log.gz")
+LOG_SUFFIXES = (
+    ".blf",
+    ".asc",
+    ".log",
+    ".trc",
+    ".csv",
+    ".asc.gz",
+    ".log.gz",
+    ".trc.gz",
+    ".csv.gz",
+)
+_BASE_FORMATS = (".blf", ".asc", ".log", ".trc", ".csv")
 
 #: python-can's BLF code treats earlier timestamps as "not a Unix time" (1990-01-01)
 _BLF_MIN_TIMESTAMP = 631152000.0
@@ -68,14 +86,14 @@ _CHANNEL_NAME = re.compile(r"^[a-z]*can(\d+)$", re.IGNORECASE)
 
 
 def log_format(path: str | Path) -> tuple[str, bool]:
-    """The format of a CAN log from its suffix: (``".blf"|".asc"|".log"``, gzipped).
+    """The format of a CAN log from its suffix: (``".blf"|".asc"|".log"|".trc"|".csv"``, gzipped).
 
     Raises `InputDataError` for anything else.
     """
     suffixes = [s.lower() for s in Path(path).suffixes]
     gz = bool(suffixes) and suffixes[-1] == ".gz"
     base = suffixes[-2] if gz and len(suffixes) >= 2 else (suffixes[-1] if suffixes else "")
-    if base not in (".blf", ".asc", ".log") or (gz and base == ".blf"):
+    if base not in _BASE_FORMATS or (gz and base == ".blf"):
         raise InputDataError(
             f"{path}: unknown CAN log format; use one of {', '.join(LOG_SUFFIXES)}"
         )
@@ -170,7 +188,7 @@ class LogProblem:
         return f"{where}: {self.reason}; {what}"
 
 
-def _channel_number(channel: Any) -> Any:
+def channel_number(channel: Any) -> Any:
     """``canN``/``vcanN`` -> N; integers stay; other names are kept as they are."""
     if isinstance(channel, str):
         m = _CHANNEL_NAME.match(channel.strip())
@@ -193,11 +211,18 @@ class _CountingLines:
         self._f = f
         self.line_no = 0
         self.broken: BaseException | None = None
+        self._pending: list[str] = []
+
+    def push_back(self, line: str) -> None:
+        """Hand out ``line`` next (not counted: it is not in the file)."""
+        self._pending.append(line)
 
     def __iter__(self) -> _CountingLines:
         return self
 
     def __next__(self) -> str:
+        if self._pending:
+            return self._pending.pop()
         if self.broken is not None:
             raise StopIteration
         try:
@@ -234,6 +259,51 @@ class _ResumableASCReader(can.ASCReader):
             super()._extract_header()
 
 
+class _ResumableTRCReader(can.TRCReader):
+    """python-can's TRC reader, able to continue after a bad line, channels from 0.
+
+    A line python-can cannot split into its columns raises here (python-can
+    would only log it), so that the bad line is recorded with its number.
+    A resumed reader keeps the version, start time and columns of the
+    header that the first reader read.
+    """
+
+    def __init__(self, file: _CountingLines, previous: object = None) -> None:
+        super().__init__(cast("TextIO", file))
+        self._previous = previous if isinstance(previous, _ResumableTRCReader) else None
+
+    def _extract_header(self) -> str | None:  # type: ignore[override]
+        prev = self._previous
+        if prev is None:
+            return super()._extract_header()
+        self.file_version = prev.file_version
+        self._start_time = prev._start_time
+        self.columns = prev.columns
+        self._num_columns = prev._num_columns
+        self._parse_cols = getattr(self, prev._parse_cols.__name__)
+        for line in self.file:
+            text = line.strip()
+            if text and not text.startswith(";"):
+                return text
+        return None
+
+    def _parse_line(self, line: str) -> can.Message | None:
+        return self._parse_cols(tuple(line.split(maxsplit=self._num_columns)))
+
+    def __iter__(self) -> Generator[can.Message, None, None]:
+        for msg in super().__iter__():
+            if isinstance(msg.channel, int):
+                msg.channel -= 1  # TRC numbers buses from 1
+            yield msg
+
+
+def _csv_reader(lines: _CountingLines, previous: object) -> can.CSVReader:
+    """python-can's CSV reader; a resumed one is given a stand-in for the header it skips."""
+    if previous is not None:
+        lines.push_back("timestamp,arbitration_id,extended,remote,error,dlc,data\n")
+    return can.CSVReader(cast("TextIO", lines))
+
+
 class CanLogReader:
     """Iterate over the frames of a CAN log, skipping and recording garbled ones.
 
@@ -258,7 +328,7 @@ class CanLogReader:
             raise InputDataError(f"{self.path}: CAN log not found")
         frames = self._iter_blf() if self.format == ".blf" else self._iter_text()
         for msg in frames:
-            msg.channel = _channel_number(msg.channel)
+            msg.channel = channel_number(msg.channel)
             yield msg
         if self.problems and self.errors == "raise":
             first = self.problems[0]
@@ -280,6 +350,10 @@ class CanLogReader:
         make: Callable[[_CountingLines, Any], Any]
         if self.format == ".asc":
             make = _ResumableASCReader
+        elif self.format == ".trc":
+            make = _ResumableTRCReader
+        elif self.format == ".csv":
+            make = _csv_reader
         else:
             make = lambda lines, _previous: can.CanutilsLogReader(cast("TextIO", lines))  # noqa: E731
         with self._open_text() as f:

@@ -37,11 +37,16 @@ from roadpreview.canbus.dbc import (
     encode_protected,
     load_database,
 )
+from roadpreview.canbus.imu_csv import IMU_CSV_COLUMNS as IMU_CSV_COLUMNS
+from roadpreview.canbus.imu_csv import IMU_CSV_COMMENT as _CSV_COMMENT
+from roadpreview.canbus.imu_csv import read_imu_csv as read_imu_csv
 from roadpreview.canbus.logio import write_can_log
 from roadpreview.errors import InputDataError
 from roadpreview.sim.imu import DEG, KMH, ImuMeasurements, ImuSamples, SpeedSamples
 
 log = logging.getLogger(__name__)
+
+# read_imu_csv and IMU_CSV_COLUMNS moved to roadpreview.canbus.imu_csv; imported above for users
 
 #: default Unix time of the simulation's t = 0 (2025-01-01T00:00:00Z): loggers store Unix time
 DEFAULT_T0_UNIX_S = 1735689600.0
@@ -49,22 +54,6 @@ DEFAULT_T0_UNIX_S = 1735689600.0
 DEFAULT_BITRATE = 500_000
 #: the simulator's bus: channel 0 (ASC/BLF number it 1, candump calls it can0)
 SIM_CHANNEL = 0
-
-IMU_CSV_COLUMNS = (
-    "t_s",
-    "gyro_x_rad_s",
-    "gyro_y_rad_s",
-    "gyro_z_rad_s",
-    "accel_x_m_s2",
-    "accel_y_m_s2",
-    "accel_z_m_s2",
-)
-_CSV_COMMENT = (
-    "# roadpreview IMU CSV: t_s = sensor time stamp (s); axes x forward, y left, z up"
-    " (ISO 8855); gyro right-handed rad/s (gyro_y > 0 = nose down); accel = specific force"
-    " m/s^2 incl. gravity (+9.81 on z at rest)"
-)
-
 
 # ---------------------------------------------------------------------------------------------
 # CAN
@@ -257,64 +246,3 @@ def write_imu_csv(path: str | Path, samples: ImuSamples | ImuMeasurements) -> in
         for row in table:
             f.write(f"{row[0]:.6f}," + ",".join(f"{v:.9g}" for v in row[1:]) + "\n")
     return len(table)
-
-
-def read_imu_csv(path: str | Path) -> ImuMeasurements:
-    """Read an IMU CSV written by `write_imu_csv` (or a phone app in the same layout).
-
-    Lines starting with ``#`` and blank lines are ignored; the first other
-    line must be the header `IMU_CSV_COLUMNS`. A bad row (wrong column
-    count, a value that is not a finite number, a time not after the
-    previous row's) is logged with its file and line number and skipped.
-    Raises `InputDataError` naming the file for a missing file, a wrong
-    header or no valid row.
-    """
-    try:
-        f = open(path, encoding="utf-8", errors="replace")  # noqa: SIM115 - closed below
-    except FileNotFoundError:
-        raise InputDataError(f"{path}: IMU CSV not found") from None
-    rows: list[list[float]] = []
-    skipped = 0
-    header_seen = False
-    with f:
-        for line_no, raw in enumerate(f, start=1):
-            line = raw.strip()
-            if not line or line.startswith("#"):
-                continue
-            fields = [c.strip() for c in line.split(",")]
-            if not header_seen:
-                if tuple(fields) != IMU_CSV_COLUMNS:
-                    raise InputDataError(
-                        f"{path}:{line_no}: header {line!r}; expected"
-                        f" {','.join(IMU_CSV_COLUMNS)}"
-                    )
-                header_seen = True
-                continue
-            reason = ""
-            values: list[float] = []
-            if len(fields) != len(IMU_CSV_COLUMNS):
-                reason = f"{len(fields)} columns, expected {len(IMU_CSV_COLUMNS)}"
-            else:
-                try:
-                    values = [float(c) for c in fields]
-                except ValueError as exc:
-                    reason = f"not a number ({exc})"
-                else:
-                    bad = [IMU_CSV_COLUMNS[i] for i, v in enumerate(values) if not math.isfinite(v)]
-                    if bad:
-                        reason = f"non-finite {', '.join(bad)}"
-                    elif rows and values[0] <= rows[-1][0]:
-                        reason = f"t_s = {values[0]} not after the previous {rows[-1][0]}"
-            if reason:
-                skipped += 1
-                log.warning("%s:%d: bad IMU row (%s); row skipped", path, line_no, reason)
-                continue
-            rows.append(values)
-    if not header_seen:
-        raise InputDataError(f"{path}: no header line; expected {','.join(IMU_CSV_COLUMNS)}")
-    if not rows:
-        raise InputDataError(f"{path}: no valid IMU rows ({skipped} bad)")
-    if skipped:
-        log.warning("%s: %d bad IMU row(s) skipped, %d read", path, skipped, len(rows))
-    table = np.asarray(rows, dtype=np.float64)
-    return ImuMeasurements(table[:, 0].copy(), table[:, 1:4].copy(), table[:, 4:7].copy())

@@ -1,0 +1,129 @@
+"""What the detector consumes and produces: trajectory samples, per-frame values, events.
+
+A `TrajectorySample` is one camera frame's compensated lead-vehicle position
+(paper eq. 4, ``docs/method.md``), with the context the detector needs to
+judge it. A `DetectorFrame` is the detector's per-frame output (s(t) and why
+it may be suppressed); an `AnomalyEvent` is one detected bump after
+non-maximum suppression. Detectors follow the `Detector` protocol.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum, IntFlag
+from typing import Protocol
+
+from roadpreview.fusion.mode import FusionMode
+
+
+class Side(IntEnum):
+    """Which half of the lead vehicle the anomaly moved; the integer goes on CAN.
+
+    Seen from behind, the left half of the lead's image is the lead's (and the
+    ego's) left side.
+    """
+
+    #: the half-vehicle trajectories were not available
+    UNKNOWN = 0
+    #: under the left wheels only (for example a pothole)
+    LEFT = 1
+    #: under the right wheels only
+    RIGHT = 2
+    #: full width (for example a speed bump)
+    BOTH = 3
+
+
+class SuppressionReason(IntFlag):
+    """Why alerts are held back at a frame; falsy when they are not. Bits go on CAN."""
+
+    NONE = 0
+    #: the lead brakes or accelerates hard: its pitch is longitudinal dynamics, not the road
+    LEAD_ACCEL = 1
+    #: the fusion is DEGRADED: the trajectory is not compensated for the ego pitch
+    DEGRADED = 2
+
+
+@dataclass(frozen=True, slots=True)
+class TrajectorySample:
+    """One frame of the compensated lead trajectory and its context.
+
+    Pixels follow ``docs/method.md`` (v down). Unknown floats are NaN;
+    ``lead_accel_mps2`` and ``ego_speed_mps`` are None when no sensor gives
+    them. ``valid=False`` marks a frame without a usable lead position (lost
+    track); it is kept for its time stamp but not used in s(t).
+    """
+
+    t: float  #: frame time, s (one clock for the whole pipeline)
+    y_c: float  #: compensated vertical image position of the lead, px (eq. 4)
+    y_c_left: float = math.nan  #: the same for the left half of the lead, px
+    y_c_right: float = math.nan  #: the same for the right half of the lead, px
+    lead_distance_m: float = math.nan  #: distance from the ego camera to the lead, m
+    lead_distance_std_m: float = math.nan  #: standard deviation of that distance, m
+    mode: FusionMode = FusionMode.FUSED  #: where the compensating pitch came from
+    lead_accel_mps2: float | None = None  #: lead's longitudinal acceleration, m/s² (+ forward)
+    ego_speed_mps: float | None = None  #: ego speed over ground from CAN, m/s
+    valid: bool = True  #: False when the lead position of this frame is unusable
+
+
+@dataclass(frozen=True, slots=True)
+class DetectorFrame:
+    """The detector's output for one frame; s values are NaN while undefined."""
+
+    t: float  #: frame time, s
+    s: float  #: paper eq. 1 on the whole lead, px
+    s_left: float  #: eq. 1 on the left half, px
+    s_right: float  #: eq. 1 on the right half, px
+    threshold_px: float  #: threshold in force at this frame, px
+    n_samples: int  #: valid samples of the whole-lead trajectory in the window
+    suppressed: SuppressionReason  #: why alerts are held back (falsy: they are not)
+
+    @property
+    def above(self) -> bool:
+        """True when s exceeds the threshold (whether or not suppressed)."""
+        return self.s > self.threshold_px
+
+
+@dataclass(frozen=True, slots=True)
+class AnomalyEvent:
+    """One detected anomaly: the peak of s(t) after non-maximum suppression.
+
+    ``t_s`` is the estimated moment the lead crossed the anomaly (the
+    steepest change of y_c in the peak's window), ``t_peak_s`` the frame of
+    the peak of s and ``t_emit_s`` the frame at which the event was
+    confirmed (``t_peak_s`` + the NMS window). Distance, speed and mode are
+    the values at the crossing. A suppressed event (``suppressed`` truthy)
+    is reported for visibility and must not raise an alert.
+    """
+
+    t_s: float  #: estimated crossing time, s
+    t_peak_s: float  #: time of the peak of s, s
+    t_emit_s: float  #: time the event was confirmed, s
+    s_px: float  #: peak value of s, px
+    s_left_px: float  #: s of the left half at the peak, px (NaN if unknown)
+    s_right_px: float  #: s of the right half at the peak, px (NaN if unknown)
+    threshold_px: float  #: threshold at the peak, px
+    side: Side  #: left / right / both / unknown
+    lead_distance_m: float  #: lead distance at the crossing, m (NaN if unknown)
+    lead_distance_std_m: float  #: its standard deviation, m (NaN if unknown)
+    ego_speed_mps: float | None  #: ego speed at the crossing, m/s
+    mode: FusionMode  #: fusion mode at the crossing
+    valid_fraction: float  #: share of the peak window's frames with a valid position
+    suppressed: SuppressionReason  #: why this peak must not become an alert (falsy: it may)
+
+
+class Detector(Protocol):
+    """A streaming anomaly detector: push one sample, get the events it confirms."""
+
+    def push(self, sample: TrajectorySample) -> list[AnomalyEvent]:
+        """Take the next frame (times increasing); return the events confirmed now."""
+        ...
+
+    def flush(self) -> list[AnomalyEvent]:
+        """End of stream: confirm and return pending peaks."""
+        ...
+
+    @property
+    def frame(self) -> DetectorFrame | None:
+        """The output for the last pushed sample (None before the first)."""
+        ...

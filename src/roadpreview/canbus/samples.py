@@ -1,0 +1,50 @@
+"""Typed input samples decoded from CAN (or read from an IMU CSV), in roadpreview's conventions.
+
+Rates follow ``docs/method.md``: roll positive when the left side rises,
+pitch positive when the nose rises, yaw positive when turning left, rad/s.
+Accelerations are specific force in ISO 8855 body axes (x forward, y left,
+z up; +9.81 m/s² on z at rest), m/s². A quantity a frame does not carry is
+NaN: IMU rates and accelerations often come in separate messages.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class ImuSample:
+    """Body rates and/or specific force at one time stamp (NaN: not in this sample)."""
+
+    t_s: float  #: time stamp (the frame's log / reception time), s
+    rates_rad_s: tuple[float, float, float]  #: (roll, pitch nose-up +, yaw left +), rad/s
+    accel_m_s2: tuple[float, float, float]  #: specific force (x fwd, y left, z up), m/s²
+    source: str = ""  #: message (or file) the sample came from
+
+    @property
+    def pitch_rate_rad_s(self) -> float:
+        """Pitch rate, nose up positive (NaN if not in this sample)."""
+        return self.rates_rad_s[1]
+
+    @property
+    def has_rates(self) -> bool:
+        """True if at least one rate is present."""
+        return any(not math.isnan(r) for r in self.rates_rad_s)
+
+    @property
+    def has_accel(self) -> bool:
+        """True if at least one acceleration is present."""
+        return any(not math.isnan(a) for a in self.accel_m_s2)
+
+
+@dataclass(frozen=True, slots=True)
+class SpeedSample:
+    """Vehicle speed over ground (magnitude) at one time stamp."""
+
+    t_s: float  #: time stamp, s
+    speed_mps: float  #: m/s (NaN: the sender flagged it not available)
+    source: str = ""  #: message the sample came from
+
+
+InputSample = ImuSample | SpeedSample
