@@ -22,9 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from roadpreview.canbus.samples import ImuSample
+from roadpreview.canbus.samples import RATE_SIGNS, ImuMeasurements, ImuSample
 from roadpreview.errors import InputDataError
-from roadpreview.sim.imu import RATE_SIGNS, ImuMeasurements
 
 log = logging.getLogger(__name__)
 

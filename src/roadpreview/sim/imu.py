@@ -33,14 +33,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import cumulative_trapezoid
 
+from roadpreview.canbus.samples import RATE_SIGNS, ImuMeasurements
 from roadpreview.configtools import check_ranges, param
 from roadpreview.errors import ConfigError, InputDataError
 
 DEG = math.pi / 180.0
 KMH = 1.0 / 3.6  # m/s per km/h
 STANDARD_GRAVITY_M_S2 = 9.80665
-#: multiply ISO 8855 body rates [wx, wy, wz] by this to get [roll, pitch(nose up), yaw] rates
-RATE_SIGNS = np.array([1.0, -1.0, 1.0])
 #: wheel order of every wheel-speed array
 WHEELS = ("FL", "FR", "RL", "RR")
 
@@ -234,31 +233,6 @@ class SpeedSensorConfig:
 
 # ---------------------------------------------------------------------------------------------
 # results
-
-
-@dataclass(frozen=True)
-class ImuMeasurements:
-    """What an IMU delivers: stamped samples in its own axes (ISO 8855: x fwd, y left, z up)."""
-
-    t_s: Array  #: (n,) sensor time stamps, s
-    gyro_rad_s: Array  #: (n, 3) angular rate about x, y, z, rad/s, right-handed
-    accel_m_s2: Array  #: (n, 3) specific force along x, y, z, m/s² (gravity included)
-
-    def __post_init__(self) -> None:
-        n = len(self.t_s)
-        for name in ("gyro_rad_s", "accel_m_s2"):
-            if getattr(self, name).shape != (n, 3):
-                raise InputDataError(
-                    f"IMU {name}: shape {getattr(self, name).shape}, expected ({n}, 3)"
-                )
-
-    def __len__(self) -> int:
-        return len(self.t_s)
-
-    @property
-    def rates_rad_s(self) -> Array:
-        """(n, 3) [roll rate, pitch rate (nose up +), yaw rate] in roadpreview's convention."""
-        return self.gyro_rad_s * RATE_SIGNS
 
 
 @dataclass(frozen=True)
