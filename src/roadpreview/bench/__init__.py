@@ -12,6 +12,7 @@ import importlib
 BENCHMARKS: dict[str, str] = {
     "pitch": "roadpreview.bench.pitch",
     "sim": "roadpreview.bench.sim",
+    "vision": "roadpreview.bench.vision",
 }
 
 

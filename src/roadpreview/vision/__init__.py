@@ -1,0 +1,81 @@
+"""The vision front end: find and track the lead vehicle, and give the pitch estimator
+clean background correspondences.
+
+Lead finders are chosen by name from `FINDERS` (imported lazily)::
+
+    finder = make_finder("motion", camera)             # built in, no model
+    finder = make_finder("onnx", camera, model_path="yolov8n.onnx")
+    finder = make_finder("box", camera, box=(500, 300, 700, 450))
+
+`VisionFrontEnd` combines a finder, the `LeadVehicleTracker` and the
+`BackgroundTracker`; ``process(t, frame)`` returns a `FrameVision` per frame.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from roadpreview.camera import CameraModel
+from roadpreview.errors import ConfigError, MissingDependencyError
+from roadpreview.vision.base import Detection, FrameContext, LeadFinder
+
+#: config name -> (module, class, config class)
+FINDERS: dict[str, tuple[str, str, str]] = {
+    "onnx": ("roadpreview.vision.onnx", "OnnxLeadFinder", "OnnxFinderConfig"),
+    "motion": ("roadpreview.vision.motion", "MotionLeadFinder", "MotionFinderConfig"),
+    "box": ("roadpreview.vision.box", "BoxLeadFinder", "BoxFinderConfig"),
+}
+
+
+def make_finder(name: str, camera: CameraModel, **options: Any) -> LeadFinder:
+    """Build the lead finder registered as ``name``; ``options`` fill its config dataclass."""
+    try:
+        module_name, cls_name, cfg_name = FINDERS[name]
+    except KeyError:
+        raise ConfigError(
+            f"vision.finder = {name!r}: unknown; choose one of {sorted(FINDERS)}"
+        ) from None
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:  # an optional dependency of that finder is missing
+        raise MissingDependencyError(
+            f"lead finder {name!r} needs the package {exc.name!r}: pip install {exc.name}"
+        ) from None
+    from roadpreview.configtools import from_mapping
+
+    config = from_mapping(getattr(module, cfg_name), options, where=f"vision.{name}")
+    finder: LeadFinder = getattr(module, cls_name)(camera, config)
+    return finder
+
+
+def __getattr__(name: str) -> Any:
+    """Lazy access to the front end's classes (keeps ``import roadpreview.vision`` light)."""
+    lazy = {
+        "VisionFrontEnd": "roadpreview.vision.frontend",
+        "VisionConfig": "roadpreview.vision.frontend",
+        "FrameVision": "roadpreview.vision.frontend",
+        "LeadVehicleTracker": "roadpreview.vision.tracker",
+        "LeadObservation": "roadpreview.vision.tracker",
+        "BackgroundTracker": "roadpreview.vision.background",
+        "BackgroundCorrespondences": "roadpreview.vision.background",
+    }
+    if name in lazy:
+        return getattr(importlib.import_module(lazy[name]), name)
+    raise AttributeError(f"module 'roadpreview.vision' has no attribute {name!r}")
+
+
+__all__ = [
+    "FINDERS",
+    "BackgroundCorrespondences",
+    "BackgroundTracker",
+    "Detection",
+    "FrameContext",
+    "FrameVision",
+    "LeadFinder",
+    "LeadObservation",
+    "LeadVehicleTracker",
+    "VisionConfig",
+    "VisionFrontEnd",
+    "make_finder",
+]

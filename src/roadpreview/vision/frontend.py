@@ -1,0 +1,226 @@
+"""The vision step per frame: lead finder + lead tracker + background tracker.
+
+``VisionFrontEnd.process(t, frame)`` prepares the frame once (grey, reduced
+image), runs the finder when there is no target or every ``redetect_s`` (to
+see cut-ins and the other vehicles to mask), tracks the lead, and tracks the
+background outside every vehicle box. A missing, black or corrupt frame gives
+a falsy lead observation and no correspondences, with the reason, never an
+exception; the trackers then continue from the last good frame.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+from roadpreview.camera import CameraModel
+from roadpreview.configtools import check_ranges, param
+from roadpreview.vision import make_finder
+from roadpreview.vision.background import (
+    BackgroundConfig,
+    BackgroundCorrespondences,
+    BackgroundTracker,
+)
+from roadpreview.vision.base import Box, Detection, FrameContext, LeadFinder
+from roadpreview.vision.tracker import LeadObservation, LeadTrackerConfig, LeadVehicleTracker
+
+
+@dataclass(frozen=True)
+class VisionConfig:
+    """Settings of the vision front end (``[vision]`` in the configuration)."""
+
+    finder: str = param(
+        "motion", choices=("motion", "onnx", "box"), help="built-in motion finder needs no model"
+    )
+    finder_options: dict[str, Any] = field(default_factory=dict)
+    small_width_px: int = param(
+        640, unit="px", ge=160, le=1920, help="background and motion work at this width (budget)"
+    )
+    redetect_s: float = param(
+        0.3,
+        unit="s",
+        gt=0.0,
+        help="run the finder this often while tracking (cut-ins, masks); ~2 ms/frame amortised",
+    )
+    detection_ttl_s: float = param(
+        0.5, unit="s", gt=0.0, help="other vehicles' boxes mask the background this long"
+    )
+    detection_growth_per_s: float = param(
+        0.5, ge=0.0, help="their boxes grow by this fraction per second of age (they move)"
+    )
+    min_frame_std: float = param(
+        2.0, ge=0.0, help="a frame with less grey-level spread is blank (black, covered)"
+    )
+    tracker: LeadTrackerConfig = field(default_factory=LeadTrackerConfig)
+    background: BackgroundConfig = field(default_factory=BackgroundConfig)
+
+    def validate(self, where: str = "vision") -> None:
+        check_ranges(self, where)
+        self.tracker.validate(f"{where}.tracker")
+        self.background.validate(f"{where}.background")
+
+
+@dataclass(frozen=True)
+class FrameVision:
+    """Everything the vision step saw in one frame.
+
+    ``timings_ms`` holds the duration of each part (finder, lead, background,
+    total) when the front end was given a clock, else it is empty.
+    """
+
+    t: float
+    index: int
+    lead: LeadObservation
+    background: BackgroundCorrespondences
+    detections: tuple[Detection, ...] = ()
+    finder_ran: bool = False
+    reason: str = ""
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    def __bool__(self) -> bool:
+        return not self.reason
+
+
+class VisionFrontEnd:
+    """Turns frames into lead observations and background correspondences.
+
+    ``clock`` (e.g. ``time.perf_counter``) is only for profiling: when given,
+    every `FrameVision` carries the time spent in each part.
+    """
+
+    def __init__(
+        self,
+        camera: CameraModel,
+        config: VisionConfig | None = None,
+        *,
+        finder: LeadFinder | None = None,
+        clock: Callable[[], float] | None = None,
+    ) -> None:
+        self.camera = camera
+        self.config = config or VisionConfig()
+        self.config.validate()
+        options = dict(self.config.finder_options)
+        if self.config.finder == "motion":
+            options.setdefault("small_width_px", self.config.small_width_px)
+        self.finder: LeadFinder = finder or make_finder(self.config.finder, camera, **options)
+        self.tracker = LeadVehicleTracker(camera, self.config.tracker)
+        self.background = BackgroundTracker(self.config.background)
+        self._clock = clock
+        self.reset()
+
+    def reset(self) -> None:
+        """Start a new sequence."""
+        self.finder.reset()
+        self.tracker.reset()
+        self.background.reset()
+        self._index = 0
+        self._last_find_t = -math.inf
+        self._others: list[tuple[float, Detection]] = []
+
+    def check_frame(self, frame: Any) -> str:
+        """Why ``frame`` cannot be used ('' when it can)."""
+        cam = self.camera
+        if frame is None:
+            return "no frame"
+        if not isinstance(frame, np.ndarray):
+            return f"frame is a {type(frame).__name__}, not an image array"
+        if frame.dtype != np.uint8:
+            return f"frame has dtype {frame.dtype}, expected uint8"
+        if frame.ndim not in (2, 3) or (frame.ndim == 3 and frame.shape[2] != 3):
+            return f"frame has shape {frame.shape}, expected (H, W, 3) BGR"
+        if frame.shape[:2] != (cam.height, cam.width):
+            return (
+                f"frame is {frame.shape[1]}x{frame.shape[0]}, the camera is "
+                f"{cam.width}x{cam.height}"
+            )
+        return ""
+
+    def process(self, t: float, frame: Any, *, pitch_rad: float = 0.0) -> FrameVision:
+        """One frame (BGR uint8, the camera's size) at time ``t`` (s).
+
+        ``pitch_rad`` is the camera's current pitch relative to rest if known
+        (it places the horizon for the motion finder and the ground distance).
+        """
+        clock = self._clock
+        t0 = clock() if clock else 0.0
+        index = self._index
+        self._index += 1
+        reason = self.check_frame(frame)
+        ctx: FrameContext | None = None
+        if not reason:
+            ctx = FrameContext.from_frame(
+                frame,
+                t=t,
+                index=index,
+                small_width=self.config.small_width_px,
+                pitch_rad=pitch_rad,
+            )
+            _, std = cv2.meanStdDev(ctx.small)
+            if float(std[0, 0]) < self.config.min_frame_std:
+                reason = "blank frame (black or uniform)"
+        if reason or ctx is None:
+            return FrameVision(
+                t=t,
+                index=index,
+                lead=LeadObservation.none(t, reason, track_id=self.tracker._track_id),
+                background=BackgroundCorrespondences.empty(t, index, reason),
+                reason=reason,
+            )
+
+        # the finder: when there is no target, else every redetect_s
+        t1 = clock() if clock else 0.0
+        run = not self.tracker.active or (t - self._last_find_t) >= 0.999 * self.config.redetect_s
+        detections: list[Detection] | None = None
+        if run:
+            detections = self.finder.find(frame, ctx)
+            self._last_find_t = t
+        else:
+            self.finder.observe(frame, ctx)
+        t2 = clock() if clock else 0.0
+        lead = self.tracker.update(ctx, detections)
+        t3 = clock() if clock else 0.0
+        boxes = self._vehicle_boxes(t, detections, lead)
+        bg = self.background.update(ctx, boxes)
+        t4 = clock() if clock else 0.0
+        timings = (
+            {
+                "finder": (t2 - t1) * 1e3,
+                "lead": (t3 - t2) * 1e3,
+                "background": (t4 - t3) * 1e3,
+                "total": (t4 - t0) * 1e3,
+            }
+            if clock
+            else {}
+        )
+        return FrameVision(
+            t=t,
+            index=index,
+            lead=lead,
+            background=bg,
+            detections=tuple(detections or ()),
+            finder_ran=run,
+            timings_ms=timings,
+        )
+
+    def _vehicle_boxes(
+        self, t: float, detections: list[Detection] | None, lead: LeadObservation
+    ) -> list[Box]:
+        """The lead's box and every recent detection (grown with age: they move)."""
+        cfg = self.config
+        if detections is not None:
+            self._others = [(t, d) for d in detections]
+        self._others = [(td, d) for td, d in self._others if t - td <= cfg.detection_ttl_s]
+        boxes: list[Box] = []
+        for td, d in self._others:  # a handful of detections
+            g = cfg.detection_growth_per_s * (t - td)
+            x0, y0, x1, y1 = d.box
+            w, h = x1 - x0, y1 - y0
+            boxes.append((x0 - g * w, y0 - g * h, x1 + g * w, y1 + g * h))
+        if lead.box is not None:
+            boxes.append(lead.box)
+        return boxes

@@ -1,0 +1,124 @@
+"""Bad input to the front end and the finder registry: values with reasons, not exceptions."""
+
+from __future__ import annotations
+
+import builtins
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from roadpreview.camera import CameraModel
+from roadpreview.errors import ConfigError, MissingDependencyError
+from roadpreview.vision import FINDERS, make_finder
+from roadpreview.vision.base import Detection
+from roadpreview.vision.frontend import VisionConfig, VisionFrontEnd
+from roadpreview.vision.tracker import LeadVehicleTracker, choose_target
+
+CAM = CameraModel.from_fov(320, 180, 54.0)
+
+
+def _textured(seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    img = rng.integers(0, 255, (180, 320, 3)).astype(np.uint8)
+    return img
+
+
+@pytest.mark.parametrize(
+    ("frame", "why"),
+    [
+        (None, "no frame"),
+        ("not an image", "not an image array"),
+        (np.zeros((180, 320, 3), np.float32), "dtype float32"),
+        (np.zeros((180, 320, 4), np.uint8), "expected (H, W, 3)"),
+        (np.zeros((100, 100, 3), np.uint8), "the camera is 320x180"),
+        (np.zeros((180, 320, 3), np.uint8), "blank frame"),
+        (np.full((180, 320, 3), 200, np.uint8), "blank frame"),
+    ],
+)
+def test_bad_frame_gives_no_target_with_reason(frame: Any, why: str) -> None:
+    fe = VisionFrontEnd(
+        CAM, VisionConfig(finder="box", finder_options={"box": (100, 80, 200, 150)})
+    )
+    out = fe.process(0.0, frame)
+    assert not out
+    assert not out.lead
+    assert not out.background
+    assert why in out.lead.reason
+    assert why in out.background.reason
+    assert math.isnan(out.lead.y)
+    assert out.background.x_key.shape == (0, 2)
+
+
+def test_tracking_resumes_after_a_black_frame() -> None:
+    img = _textured()
+    fe = VisionFrontEnd(
+        CAM, VisionConfig(finder="box", finder_options={"box": (100, 80, 200, 150)})
+    )
+    first = fe.process(0.0, img)
+    assert first.lead
+    assert first.lead.target_changed
+    assert not fe.process(1 / 30, np.zeros_like(img)).lead
+    again = fe.process(2 / 30, img)
+    assert again.lead
+    assert not again.lead.target_changed
+    assert again.lead.y == pytest.approx(first.lead.y, abs=0.05)  # a static scene: y stays
+
+
+def test_registry_names_and_errors() -> None:
+    assert set(FINDERS) == {"onnx", "motion", "box"}
+    with pytest.raises(ConfigError, match=r"unknown; choose one of"):
+        make_finder("yolo", CAM)
+    with pytest.raises(ConfigError, match=r"unknown key vision\.box\.colour"):
+        make_finder("box", CAM, box=(1, 1, 10, 10), colour="red")
+    with pytest.raises(ConfigError, match="model_path"):
+        make_finder("onnx", CAM)
+
+
+def test_missing_onnxruntime_says_what_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
+    real_import = builtins.__import__
+
+    def fake_import(name: str, *args: Any, **kwargs: Any) -> Any:
+        if name == "onnxruntime":
+            raise ImportError("No module named 'onnxruntime'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", fake_import)
+    with pytest.raises(MissingDependencyError, match="pip install onnxruntime"):
+        make_finder("onnx", CAM, model_path="model.onnx")
+
+
+def test_target_is_the_vehicle_nearest_the_centre() -> None:
+    cam = CameraModel(width=1242, height=375, fx=721.5, fy=721.5, cx=609.6, cy=172.9)
+    dets = [
+        Detection((62, 180, 415, 370), 0.9, "car"),  # adjacent lane, left
+        Detection((590, 170, 640, 205), 0.8, "car"),  # far, in our lane, spans the centre
+        Detection((555, 190, 700, 315), 0.85, "car"),  # the lead: spans the centre, nearest
+        Detection((790, 40, 1140, 370), 0.9, "truck"),  # right
+        Detection((600, 20, 620, 40), 0.9, "car"),  # above the horizon: ignored
+    ]
+    assert choose_target(dets, cam, horizon_v=172.9) == 2
+    assert choose_target(dets[:2] + dets[3:], cam, horizon_v=172.9) == 1
+
+
+def test_distance_cues_and_their_fusion() -> None:
+    cam = CameraModel(
+        width=1280, height=720, fx=700.0, fy=700.0, cx=639.5, cy=359.5, mount_height_m=1.3
+    )
+    tr = LeadVehicleTracker(cam)
+    cfg = tr.config
+    d = 10.0
+    w = 700.0 * cfg.vehicle_width_m / (d + cfg.width_section_ahead_m)
+    bottom = 359.5 + 700.0 * 1.3 / (d + cfg.rear_overhang_m)
+    box = (639.5 - w / 2, bottom - 100, 639.5 + w / 2, bottom)
+    fused, std, dw, dg = tr.distance(box, 2.0)
+    assert dw == pytest.approx(d, rel=1e-9)
+    assert dg == pytest.approx(d, rel=1e-9)
+    assert fused == pytest.approx(d, rel=1e-9)
+    assert 0.0 < std < 0.6
+    # a box cut by the image bottom has no ground cue; cut at the side, no width cue
+    _, _, _, dg2 = tr.distance((box[0], box[1], box[2], 719.5), 2.0)
+    assert math.isnan(dg2)
+    _, _, dw3, _ = tr.distance((0.0, box[1], box[2], box[3]), 2.0)
+    assert math.isnan(dw3)
