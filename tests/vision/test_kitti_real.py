@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from roadpreview.camera import CameraModel
-from roadpreview.vision.frontend import VisionConfig, VisionFrontEnd
+from roadpreview.vision.frontend import FrameVision, VisionConfig, VisionFrontEnd
 from roadpreview.vision.onnx import OnnxFinderConfig, OnnxLeadFinder
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -36,7 +36,9 @@ YOLOX_DESC = ROOT / "data" / "models" / "yolox_nano.toml"
 def _frames(kitti_dir: Path) -> list[np.ndarray]:
     files = sorted((kitti_dir / "frames").glob("*.png"))
     assert len(files) == 78
-    return [cv2.imread(str(f)) for f in files]
+    frames = [cv2.imread(str(f)) for f in files]
+    assert all(f is not None for f in frames)
+    return [np.asarray(f) for f in frames]
 
 
 def _lidar_camera_distance(kitti_dir: Path) -> np.ndarray:
@@ -45,16 +47,17 @@ def _lidar_camera_distance(kitti_dir: Path) -> np.ndarray:
     return np.array([float(r["lead_distance_m_lidar_p5"]) for r in rows]) - LIDAR_BEHIND_CAMERA_M
 
 
-def _run(fe: VisionFrontEnd, frames: list[np.ndarray]) -> list:  # type: ignore[type-arg]
+def _run(fe: VisionFrontEnd, frames: list[np.ndarray]) -> list[FrameVision]:
     return [fe.process(i / 10.0, f) for i, f in enumerate(frames)]
 
 
-def _check_lead_tracked(outs: list, truth: np.ndarray, first: int) -> np.ndarray:  # type: ignore[type-arg]
+def _check_lead_tracked(outs: list[FrameVision], truth: np.ndarray, first: int) -> np.ndarray:
     """Every frame from ``first`` on: one target, spanning the lead's column; distance errors."""
     ids = {o.lead.track_id for o in outs[first:]}
     assert all(o.lead for o in outs[first:]), [o.lead.reason for o in outs if not o.lead][:3]
     assert len(ids) == 1, f"target changed: track ids {sorted(ids)}"
     for o in outs[first:]:
+        assert o.lead.box is not None
         x0, _, x1, _ = o.lead.box
         assert x0 < 630 < x1, (o.index, o.lead.box)
     d = np.array([o.lead.distance_m for o in outs[first:]])
@@ -86,11 +89,6 @@ def test_onnx_finds_and_tracks_the_lead_with_distance_within_15_percent(
 
 
 @pytest.mark.shared
-@pytest.mark.xfail(
-    strict=True,
-    reason="the motion finder boxes only part of the KITTI lead (it moves at about half the "
-    "ego speed and the asphalt is poorly textured) and switches between candidates",
-)
 def test_motion_finds_and_tracks_the_lead_with_distance_within_15_percent(
     kitti_dir: Path,
 ) -> None:
@@ -100,4 +98,5 @@ def test_motion_finds_and_tracks_the_lead_with_distance_within_15_percent(
     first = next(i for i, o in enumerate(outs) if o.lead)
     assert first <= 3  # found within the first frames (it needs an earlier frame)
     err = _check_lead_tracked(outs, _lidar_camera_distance(kitti_dir), first)
+    # measured: found at frame 1, mean +0.1 %, median |err| 0.8 %, max |err| 5.0 %
     assert np.max(np.abs(err)) < 0.15, err.round(3)

@@ -180,12 +180,7 @@ def test_motion_finds_the_lead_at_the_paper_gap(make_recording) -> None:  # type
     assert changes <= 2, changes
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="a 24 px lead at 26-30 m (seed 0) gives too few corners and too little parallax "
-    "at 640x360 for the window search to hold it every frame (measured 58 %)",
-)
 def test_motion_finds_the_lead_in_95_percent_of_a_wild_drive(make_recording) -> None:  # type: ignore[no-untyped-def]
     rec = make_recording("wild", masks=True, **DRIVE)
     rate, _ = find_rate(rec)
-    assert rate >= 0.95, rate
+    assert rate >= 0.95, rate  # measured 99.7 % (frame 0 has no earlier frame)

@@ -33,7 +33,9 @@ class Detection:
     finder, what the motion says ("vehicle" moving with or away from the ego,
     "oncoming", "obstacle" standing in the ego lane). ``mask`` is an optional
     full-frame boolean mask (instance segmentation). ``edge_sigma_px`` is the
-    1-sigma uncertainty of each box edge, used for the distance's uncertainty.
+    1-sigma uncertainty of each box edge, used for the distance's uncertainty;
+    ``bottom_sigma_px`` that of the bottom edge when it is less certain than the
+    sides (None: ``edge_sigma_px``), e.g. a shadow line that may lie below the contact.
     """
 
     box: Box
@@ -41,6 +43,7 @@ class Detection:
     class_name: str
     mask: NDArray[np.bool_] | None = None
     edge_sigma_px: float = 3.0
+    bottom_sigma_px: float | None = None
 
     @property
     def width(self) -> float:

@@ -29,7 +29,9 @@ clusters with one common expansion; a cluster is reported as
   a static object's base far below its lowest point,
 * ``obstacle``: static-looking but standing in the ego lane (a stopped lead),
 
-and boxed (the cluster's hull grown by half a sampling cell). The tracker
+and boxed (the cluster's hull grown by half a sampling cell). The lead window's
+box is fitted to the image by `fit_rear` (symmetric side edges, the bottom's
+shadow line, a width that fits the flat-road distance of that bottom). The tracker
 picks the lead among them. When the ego hardly moves there is no parallax and
 nothing is found (``last_reason`` says so): the tracker keeps its target.
 """
@@ -145,6 +147,47 @@ class MotionFinderConfig:
     min_rigid_fraction: float = param(
         0.6, gt=0.0, le=1.0, help="share of a window's points that must expand as one plane"
     )
+    rear_min_width_m: float = param(
+        1.3,
+        unit="m",
+        gt=0.0,
+        help="narrowest rear fitted at the distance of its bottom row (a small car, "
+        "less the horizon's uncertainty)",
+    )
+    rear_max_width_m: float = param(
+        2.6,
+        unit="m",
+        gt=0.0,
+        help="widest rear fitted at the distance of its bottom row (a car's widest "
+        "section is ~0.8 m ahead of the contact, a van is 2.0 m wide)",
+    )
+    rear_rows_below: float = param(
+        1.2,
+        ge=0.0,
+        help="the rear's bottom is searched this far (fraction of the rough width) below "
+        "the motion window: a close lead's lower rear hardly moves against its road",
+    )
+    rear_centre_shift: float = param(
+        0.6, ge=0.0, help="lateral search for the rear, fraction of the rough width"
+    )
+    rear_edge_aspect: float = param(
+        0.75,
+        gt=0.0,
+        le=1.5,
+        help="the side edges are measured over this fraction of the width above the "
+        "bottom (bumper, lights, tyres)",
+    )
+    rear_min_edge: float = param(
+        1.5,
+        ge=0.0,
+        help="weaker side edges (times the mean |gx| below the horizon): keep the motion box",
+    )
+    rear_bottom_sigma: float = param(
+        0.25,
+        ge=0.0,
+        help="1-sigma of the fitted bottom line, fraction of the width: it may be the "
+        "lower edge of a shadow cast behind the vehicle rather than the tyres' contact",
+    )
     merge_expansion: float = param(
         0.01, ge=0.0, help="clusters whose expansions differ by less may be one vehicle"
     )
@@ -171,6 +214,7 @@ class MotionDiagnostics:
     pitch_rad: float = math.nan
     yaw_rad: float = math.nan
     clusters: list[dict[str, Any]] = field(default_factory=list)
+    rear: RearFit | None = None
     arrays: dict[str, Any] = field(default_factory=dict)
 
 
@@ -434,12 +478,15 @@ class MotionLeadFinder:
         members = (inw[bi] & (dev[bi] <= tol_w[bi]) & good[bi][:, None]).any(axis=0)
         xs = px[members]
         hx0, hx1 = float(np.percentile(xs, 5)), float(np.percentile(xs, 95))
-        box_s = self._refine(
-            ctx.small, (hx0, float(top[bi] + v_h), hx1, float(yb[bi] + v_h)), dist, f
-        )
-        # a vehicle's rear is at least 0.8 times as tall as it is wide
-        top_v = min(float(top[bi] + v_h), float(yb[bi] + v_h) - 0.8 * (box_s[2] - box_s[0]))
-        box_s = (box_s[0], top_v, box_s[2], float(yb[bi] + v_h))
+        rough = (hx0, float(top[bi] + v_h), hx1, float(yb[bi] + v_h))
+        fit = self._fit_rear(ctx.small, rough, v_h, f)
+        if fit is not None:
+            box_s = fit.box
+        else:
+            box_s = self._refine(ctx.small, rough, dist, f)
+            # a vehicle's rear is at least 0.8 times as tall as it is wide
+            top_v = min(rough[1], rough[3] - 0.8 * (box_s[2] - box_s[0]))
+            box_s = (box_s[0], top_v, box_s[2], rough[3])
         self.diagnostics.clusters.append(
             {
                 "n": int(n_w[bi, li]),
@@ -462,8 +509,13 @@ class MotionLeadFinder:
         )
         kind = "vehicle" if slow[bi, li] else "obstacle"
         score = float(np.clip(1.0 - ratio[bi, li], 0.05, 1.0))
+        bw = box[2] - box[0]
         return Detection(
-            box, score, kind, edge_sigma_px=max(2.0 / ctx.scale, 0.05 * (box[2] - box[0]))
+            box,
+            score,
+            kind,
+            edge_sigma_px=max(2.0 / ctx.scale, 0.05 * bw),
+            bottom_sigma_px=None if fit is None else cfg.rear_bottom_sigma * bw,
         )
 
     def _fit_k(
@@ -650,6 +702,28 @@ class MotionLeadFinder:
                     break
         return found
 
+    def _fit_rear(
+        self, img: U8, rough: tuple[float, float, float, float], v_h: float, f: float
+    ) -> RearFit | None:
+        """`fit_rear` with this finder's settings; None when the edges are too weak."""
+        cfg = self.config
+        fit = fit_rear(
+            img,
+            rough,
+            v_horizon=v_h,
+            f=f,
+            height_m=self.camera.mount_height_m,
+            min_width_m=cfg.rear_min_width_m,
+            max_width_m=cfg.rear_max_width_m,
+            rows_below=cfg.rear_rows_below,
+            centre_shift=cfg.rear_centre_shift,
+            aspect=cfg.rear_edge_aspect,
+        )
+        self.diagnostics.rear = fit
+        if fit is None or fit.edge < cfg.rear_min_edge:
+            return None
+        return fit
+
     def _refine(
         self, img: U8, box: tuple[float, float, float, float], d: float, f: float
     ) -> tuple[float, float, float, float]:
@@ -727,3 +801,109 @@ def _derotate(b: F64, cam: CameraModel, phi: float, yaw: float) -> F64:
     H = cam.K @ R.T @ cam.K_inv
     hb = np.c_[b, np.ones(b.shape[0])] @ H.T
     return np.asarray(hb[:, :2] / hb[:, 2:3], np.float64)
+
+
+@dataclass(frozen=True)
+class RearFit:
+    """A vehicle rear fitted to the image (`fit_rear`), small-image pixels."""
+
+    box: tuple[float, float, float, float]
+    score: float
+    edge: float
+    bottom: float
+
+
+def fit_rear(
+    img: U8,
+    rough: tuple[float, float, float, float],
+    *,
+    v_horizon: float,
+    f: float,
+    height_m: float,
+    min_width_m: float,
+    max_width_m: float,
+    rows_below: float,
+    centre_shift: float,
+    aspect: float,
+    bottom_weight: float = 1.0,
+    near_fraction: float = 0.7,
+    height_ratio: float = 0.8,
+) -> RearFit | None:
+    """The vehicle rear near ``rough``: a box whose sides are the strongest pair of
+    vertical edges (a rear is left-right symmetric: both sides must be strong), whose
+    bottom is a dark-above/bright-below line (the shadow and tyres on the road), and
+    whose width fits the distance of that bottom on the flat road
+    (``w = f W / d``, ``d = f h / (v_bottom - v_horizon)``, W in [min, max]).
+
+    Hypotheses (bottom row x width x centre) are scored at once from running sums of
+    the gradient images (vectorised). ``rows_below`` (fraction of the rough width)
+    extends the bottom search below the rough box, ``centre_shift`` (same unit) the
+    lateral search; ``aspect`` is the height of the edge band over the width.
+    """
+    h, w = img.shape
+    x0, y0, x1, y1 = rough
+    rw = max(x1 - x0, 4.0)
+    xc0 = 0.5 * (x0 + x1)
+    yb_lo = int(max(v_horizon + 2.0, y0 + 0.3 * (y1 - y0)))
+    yb_hi = int(min(h - 1, y1 + rows_below * rw))
+    if yb_hi - yb_lo < 1:
+        return None
+    ys = np.arange(yb_lo, yb_hi + 1)
+    d_c = f * height_m / np.maximum(ys - v_horizon, 1.0)
+    nw = 24
+    u = np.linspace(0.0, 1.0, nw)
+    w_lo = f * min_width_m / d_c
+    wid = w_lo[:, None] * (max_width_m / min_width_m) ** u[None, :]  # (Y, W)
+    wid = np.minimum(wid, 0.95 * w)
+    shift = centre_shift * rw
+    cs = xc0 + np.arange(-shift, shift + 0.5, max(1.0, shift / 30.0))  # (C,)
+    # running sums: vertical edges down the columns, signed row gradient along rows
+    sm = cv2.GaussianBlur(img, (3, 3), 0)
+    gx = np.abs(cv2.Sobel(sm, cv2.CV_32F, 1, 0, ksize=3))
+    gx = cv2.dilate(gx, np.ones((1, 3), np.uint8))  # an edge one column off still counts
+    gy = cv2.Sobel(sm, cv2.CV_32F, 0, 1, ksize=3)  # + : darker above, brighter below
+    gy = cv2.dilate(gy, np.ones((3, 1), np.uint8))
+    col = np.zeros((h + 1, w), np.float64)
+    np.cumsum(gx, axis=0, out=col[1:])
+    row = np.zeros((h, w + 1), np.float64)
+    np.cumsum(gy, axis=1, out=row[:, 1:])
+    sx = float(np.mean(gx[int(max(v_horizon, 0)) :, :])) + 1e-6
+    sy = float(np.mean(np.abs(gy[int(max(v_horizon, 0)) :, :]))) + 1e-6
+    Y = ys[:, None, None]
+    Wd = wid[:, :, None]
+    C = cs[None, None, :]
+    xl = np.round(C - 0.5 * Wd).astype(np.int64)
+    xr = np.round(C + 0.5 * Wd).astype(np.int64)
+    ok = (xl >= 1) & (xr <= w - 2)
+    xl = np.clip(xl, 0, w - 1)
+    xr = np.clip(xr, 0, w - 1)
+    yb = np.broadcast_to(Y, xl.shape)
+    # the sides between the tyres' top and the rear's upper part (below: tyres, shadow)
+    r1 = np.broadcast_to(np.clip(np.round(Y - 0.15 * Wd).astype(np.int64) + 1, 1, h), xl.shape)
+    r0 = np.clip(np.round(Y - aspect * Wd).astype(np.int64), 0, h - 1)
+    r0 = np.broadcast_to(r0, xl.shape)
+    n_r = np.maximum(r1 - r0, 1)
+    pl = (col[r1, xl] - col[r0, xl]) / n_r
+    pr = (col[r1, xr] - col[r0, xr]) / n_r
+    edge = np.minimum(pl, pr) / sx
+    # the bottom line over the inner 80 % of the width (cut by the image: no cue)
+    ia = np.clip(np.round(C - 0.4 * Wd).astype(np.int64), 0, w - 1)
+    ib = np.clip(np.round(C + 0.4 * Wd).astype(np.int64), 1, w)
+    ib = np.maximum(ib, ia + 1)
+    ybc = np.minimum(yb, h - 1)
+    bottom = (row[ybc, ib] - row[ybc, ia]) / (ib - ia) / sy
+    bottom = np.where(yb >= h - 2, 0.0, np.maximum(bottom, 0.0))
+    score = np.where(ok, edge + bottom_weight * bottom, -np.inf)
+    best_row = score.reshape(score.shape[0], -1).max(axis=1)
+    top_score = float(best_row.max())
+    if not np.isfinite(top_score):
+        return None
+    # the nearest (lowest) rear among the strong ones: a far car seen above or through
+    # the lead is not the lead (the paper's rule, within one candidate)
+    i = int(np.nonzero(best_row >= near_fraction * top_score)[0][-1])
+    j, m = np.unravel_index(int(np.argmax(score[i])), score.shape[1:])
+    ww = float(wid[i, j])
+    xc = float(cs[m])
+    ybest = float(ys[i])
+    box = (xc - 0.5 * ww, ybest - height_ratio * ww, xc + 0.5 * ww, ybest)
+    return RearFit(box, float(score[i, j, m]), float(edge[i, j, m]), float(bottom[i, j, m]))

@@ -248,6 +248,7 @@ class LeadVehicleTracker:
         self._active = False
         self._class = ""
         self._edge_sigma = 3.0
+        self._bottom_sigma: float | None = None
         self._pending: tuple[Box, int] | None = None
         self.reset()
 
@@ -332,6 +333,7 @@ class LeadVehicleTracker:
         self._box = box
         self._class = det.class_name
         self._edge_sigma = det.edge_sigma_px
+        self._bottom_sigma = det.bottom_sigma_px
         pts = self._points.astype(np.float64)
         mx = float(np.median(pts[:, 0]))
         left, right = pts[pts[:, 0] < mx], pts[pts[:, 0] >= mx]
@@ -400,6 +402,17 @@ class LeadVehicleTracker:
             self._pending = None
             self._refresh(det)
             return False
+        # the target still tracked competes by the same rule: a detection that is not
+        # nearer the centre than it is another vehicle, not a cut-in
+        column = self.camera.fx * self.camera.t[0] / self.camera.t[2] + self.camera.cx
+        current = Detection(self._box, 1.0, self._class)
+        if target_key(det, column, cfg.centre_tolerance) >= target_key(
+            current, column, cfg.centre_tolerance
+        ):
+            self._pending = None
+            if j >= 0 and ious[j] >= cfg.match_iou:
+                self._refresh(detections[j])
+            return False
         # another vehicle is now nearest the centre (cut-in): confirm before switching
         if self._pending is not None and box_iou(self._pending[0], det.box) >= cfg.match_iou:
             count = self._pending[1] + 1
@@ -426,6 +439,7 @@ class LeadVehicleTracker:
             (1 - a) * o[3] + a * box[3],
         )
         self._edge_sigma = det.edge_sigma_px
+        self._bottom_sigma = det.bottom_sigma_px
 
     def _track(self, prev: NDArray[np.uint8], ctx: FrameContext) -> tuple[str, bool]:
         """Move the points, fit the motion, move anchors and box; '' or why it was lost."""
@@ -490,7 +504,9 @@ class LeadVehicleTracker:
 
     # -- output -----------------------------------------------------------------------
     def _observation(self, ctx: FrameContext, changed: bool, reseeded: bool) -> LeadObservation:
-        d, sd, dw, dg = self.distance(self._box, self._edge_sigma, ctx.pitch_rad)
+        d, sd, dw, dg = self.distance(
+            self._box, self._edge_sigma, ctx.pitch_rad, bottom_sigma_px=self._bottom_sigma
+        )
         return LeadObservation(
             t=ctx.t,
             y=self._anchor[1],
@@ -509,7 +525,12 @@ class LeadVehicleTracker:
         )
 
     def distance(
-        self, box: Box, edge_sigma_px: float, pitch_rad: float = 0.0
+        self,
+        box: Box,
+        edge_sigma_px: float,
+        pitch_rad: float = 0.0,
+        *,
+        bottom_sigma_px: float | None = None,
     ) -> tuple[float, float, float, float]:
         """(fused distance, its std, width cue, ground cue) in metres for ``box``.
 
@@ -517,7 +538,8 @@ class LeadVehicleTracker:
         or right image edge is cut and gives no width cue. Ground: the bottom
         edge is the rear tyres' contact: ``d = fy h / (v_b - v_horizon) -
         overhang``; a box touching the bottom edge gives no ground cue.
-        Variances by first-order propagation.
+        Variances by first-order propagation; ``bottom_sigma_px`` (default
+        ``edge_sigma_px``) is the bottom edge's uncertainty.
         """
         cfg = self.config
         cam = self.camera
@@ -537,7 +559,8 @@ class LeadVehicleTracker:
             contact = cam.fy * hgt / y
             dg = contact - cfg.rear_overhang_m
             if dg > 0.5:
-                sv = math.hypot(edge_sigma_px, cam.fy * cfg.pitch_std_rad)
+                sb = edge_sigma_px if bottom_sigma_px is None else bottom_sigma_px
+                sv = math.hypot(sb, cam.fy * cfg.pitch_std_rad)
                 sd = math.hypot(contact * sv / y, contact * cfg.height_std_m / hgt)
                 cues.append((dg, math.hypot(sd, 0.2)))
             else:
