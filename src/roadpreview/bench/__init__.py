@@ -13,6 +13,7 @@ BENCHMARKS: dict[str, str] = {
     "pitch": "roadpreview.bench.pitch",
     "sim": "roadpreview.bench.sim",
     "vision": "roadpreview.bench.vision",
+    "fusion": "roadpreview.bench.fusion",
 }
 
 

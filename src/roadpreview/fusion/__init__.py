@@ -1,1 +1,66 @@
-"""Pitch fusion: visual pitch + IMU gyro; back ends chosen by name, modes and fallback."""
+"""Pitch fusion: visual pitch + IMU gyro; back ends chosen by name, modes and fallback.
+
+Back ends are chosen by name from `BACKENDS` (imported lazily)::
+
+    fusion = make_fusion("kalman", gyro={"noise_density": 3e-4})
+    fusion.push_gyro(t_imu, pitch_rate)
+    fusion.push_visual(VisualPitch(t_key, t_frame, dphi, std, inlier_ratio, quality_ok))
+    out = fusion.estimate(t_frame)          # FusedPitch: phi, std, mode, bias, time offset
+    y_c = compensation(y, out.phi, camera.fy)
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from roadpreview.errors import ConfigError
+from roadpreview.fusion.base import FusedPitch, PitchFusion, VisualPitch
+from roadpreview.fusion.compensation import compensation
+from roadpreview.fusion.mode import FusionMode
+
+#: config name -> (module, class, config class)
+BACKENDS: dict[str, tuple[str, str, str | None]] = {
+    "kalman": ("roadpreview.fusion.kalman", "GyroPitchKalmanFilter", "KalmanConfig"),
+    "factor-graph": (
+        "roadpreview.fusion.factor_graph",
+        "GyroPitchFixedLagSmoother",
+        "FactorGraphConfig",
+    ),
+    "visual-only": ("roadpreview.fusion.baselines", "VisualOnlyPitch", "VisualOnlyConfig"),
+    "imu-only": ("roadpreview.fusion.baselines", "ImuOnlyPitch", "ImuOnlyConfig"),
+    "none": ("roadpreview.fusion.baselines", "NoCompensation", None),
+}
+
+
+def make_fusion(name: str, **options: Any) -> PitchFusion:
+    """Build the back end registered as ``name``; ``options`` fill its config dataclass
+    (nested tables as dicts: ``gyro={"noise_density": ...}``)."""
+    try:
+        module_name, cls_name, cfg_name = BACKENDS[name]
+    except KeyError:
+        raise ConfigError(
+            f"fusion.backend = {name!r}: unknown; choose one of {sorted(BACKENDS)}"
+        ) from None
+    module = importlib.import_module(module_name)
+    cls = getattr(module, cls_name)
+    if cfg_name is None:
+        if options:
+            raise ConfigError(f"fusion back end {name!r} takes no options, got {sorted(options)}")
+        return cls()
+    from roadpreview.configtools import from_mapping
+
+    config_module = importlib.import_module("roadpreview.fusion.config")
+    config = from_mapping(getattr(config_module, cfg_name), options, where="fusion")
+    return cls(config)
+
+
+__all__ = [
+    "BACKENDS",
+    "FusedPitch",
+    "FusionMode",
+    "PitchFusion",
+    "VisualPitch",
+    "compensation",
+    "make_fusion",
+]

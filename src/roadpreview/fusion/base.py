@@ -1,0 +1,128 @@
+"""The pitch-fusion interface: what goes in (gyro, visual pitch), what comes out (`FusedPitch`).
+
+Every back end is a streaming estimator with the same five calls::
+
+    fusion.push_gyro(t_stamp, pitch_rate)                  # IMU clock, rad/s, nose up +
+    fusion.push_visual(VisualPitch(t_ref, t, dphi, std, inlier_ratio, quality_ok))
+    fusion.push_vision_failure(t, "fog")                  # the front end saw no texture
+    out = fusion.estimate(t)                              # at a frame time (camera clock)
+    fusion.reset()
+
+Times are seconds. Gyro time stamps are on the IMU's clock, which may be
+offset from the camera's (the fusion estimates the offset); visual times are
+frame times on the camera clock. Angles are radians, pitch positive nose up
+(``docs/method.md``). The fused pitch is relative to the camera's attitude at
+the first frame (``docs/fusion.md``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+from roadpreview.fusion.mode import FusionMode
+from roadpreview.pitch.base import PitchEstimate
+
+
+@dataclass(frozen=True, slots=True)
+class VisualPitch:
+    """A visual pitch measurement between two frames, as the vision front end delivers it.
+
+    ``dphi`` is phi(t) - phi(t_ref): the pitch of frame ``t`` relative to the
+    reference (key) frame ``t_ref``, or to the previous frame for a
+    frame-to-frame pair. ``std`` (rad) and ``inlier_ratio`` come from the
+    pitch estimator; ``quality_ok`` is the front end's verdict on the frame
+    (enough texture, enough points, a good fit).
+    """
+
+    t_ref: float
+    t: float
+    dphi: float
+    std: float
+    inlier_ratio: float = 1.0
+    quality_ok: bool = True
+
+    @classmethod
+    def from_estimate(
+        cls, t_ref: float, t: float, est: PitchEstimate, *, quality_ok: bool = True
+    ) -> VisualPitch:
+        """Wrap a `PitchEstimate` of frame ``t`` against key frame ``t_ref``.
+
+        A falsy estimate (failed fit) gives a measurement with ``quality_ok``
+        False, which the fusion treats as a vision failure at ``t``.
+        """
+        return cls(
+            t_ref=t_ref,
+            t=t,
+            dphi=est.phi,
+            std=est.std,
+            inlier_ratio=est.inlier_ratio,
+            quality_ok=quality_ok and bool(est),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class FusedPitch:
+    """The fused camera pitch at a frame time.
+
+    ``phi`` (rad) is relative to the attitude at the first frame; ``std`` its
+    standard deviation (it grows honestly while vision is lost); ``bias`` the
+    gyro pitch-rate bias estimate (rad/s) with ``bias_std``; ``time_offset``
+    the IMU clock minus the camera clock (s, stamps lag when positive) that
+    the fusion applies, with ``time_offset_confidence`` in [0, 1] (0: not
+    estimated yet, the configured initial value is used).
+    """
+
+    t: float
+    phi: float
+    std: float
+    mode: FusionMode
+    bias: float = math.nan
+    time_offset: float = 0.0
+    time_offset_confidence: float = 0.0
+    bias_std: float = math.nan
+
+    @property
+    def phi_deg(self) -> float:
+        """The pitch in degrees (for display and reports)."""
+        return math.degrees(self.phi)
+
+    @property
+    def std_deg(self) -> float:
+        return math.degrees(self.std)
+
+
+@runtime_checkable
+class PitchFusion(Protocol):
+    """Fuses gyro pitch rates with relative visual pitch; one value per frame time."""
+
+    #: registry name ("kalman", "factor-graph", "visual-only", "imu-only", "none")
+    name: str
+
+    def push_gyro(
+        self,
+        t: float,
+        pitch_rate: float,
+        *,
+        roll_rate: float | None = None,
+        yaw_rate: float | None = None,
+    ) -> bool:
+        """Add one gyro sample (IMU clock, rad/s); False if it was rejected (logged)."""
+        ...
+
+    def push_visual(self, meas: VisualPitch) -> None:
+        """Add a relative visual pitch measurement between two frame times."""
+        ...
+
+    def push_vision_failure(self, t: float, reason: str) -> None:
+        """Say that vision gave nothing usable for the frame at ``t``."""
+        ...
+
+    def estimate(self, t: float) -> FusedPitch:
+        """The fused pitch at frame time ``t`` (camera clock), from everything pushed so far."""
+        ...
+
+    def reset(self) -> None:
+        """Forget everything (a new drive)."""
+        ...

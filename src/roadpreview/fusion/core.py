@@ -1,0 +1,539 @@
+"""The streaming machinery shared by the `kalman` and `factor-graph` back ends.
+
+What every back end needs and nothing in it is specific to one of them:
+
+* the gyro buffer (`GyroHistory`: validation, ordering, gaps, running integral),
+* the camera-IMU time offset (`TimeOffsetEstimator`), applied to every gyro query,
+* the frames and their visual results, processed in time order,
+* the mode supervisor (`ModeSupervisor`: vision trust with hysteresis, IMU liveness),
+* re-validation of vision against the gyro, the measurement variance,
+* the output stage: a correction at a mode switch is eased in, never a step.
+
+Time handling. Frames are committed (processed for good, in time order) up
+to a horizon: the frame time asked for, but no later than the newest gyro
+sample (on the camera clock) minus `GyroConfig.reorder_window_s`, so that
+gyro samples still on their way are not missed. When the IMU has timed out
+the horizon is the frame time and the gap is bridged without gyro. Frames
+beyond the horizon are processed tentatively for the output (the last gyro
+rate held, with growing variance) and processed again for good once the
+gyro has arrived. Back ends that can copy their state do this exactly
+(`kalman`); the others extrapolate from their last committed frame.
+"""
+
+from __future__ import annotations
+
+import bisect
+import logging
+import math
+from abc import ABC, abstractmethod
+from dataclasses import replace
+from typing import Any
+
+from roadpreview.errors import InputDataError
+from roadpreview.fusion.base import FusedPitch, VisualPitch
+from roadpreview.fusion.config import FusionConfig
+from roadpreview.fusion.gyro import GyroHistory, Motion, RejectCounter
+from roadpreview.fusion.mode import FusionMode
+from roadpreview.fusion.modes import ModeSupervisor, VisionTrust
+from roadpreview.fusion.timesync import TimeOffsetEstimator
+
+log = logging.getLogger(__name__)
+
+
+class StreamingFusion(ABC):
+    """Base of the filter-like back ends: buffering, alignment, modes, output."""
+
+    name = "abstract"
+    #: the back end can snapshot and restore its state (exact tentative processing)
+    can_rewind = False
+
+    _last_query: float
+    _last_out: FusedPitch | None
+
+    def __init__(self, config: FusionConfig) -> None:
+        config.validate("fusion")
+        self.config = config
+        self.events = RejectCounter(f"fusion[{self.name}]")
+        self.gyro = GyroHistory(config.gyro, self.events)
+        self.aligner = TimeOffsetEstimator(config.alignment)
+        self._q_bias = config.gyro.bias_random_walk**2
+        self._reset_core()
+        self._bk_reset()
+
+    # -- public interface -------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget everything (a new drive)."""
+        self.gyro.reset()
+        self.aligner.reset()
+        self.events.counts.clear()
+        self._reset_core()
+        self._bk_reset()
+
+    def push_gyro(
+        self,
+        t: float,
+        pitch_rate: float,
+        *,
+        roll_rate: float | None = None,
+        yaw_rate: float | None = None,
+    ) -> bool:
+        """Add a gyro sample (IMU clock). Roll and yaw rates are checked, not yet used."""
+        for name, v in (("roll_rate", roll_rate), ("yaw_rate", yaw_rate)):
+            if v is not None and not math.isfinite(v):
+                self.events("nonfinite", "%s %r at t=%r is not finite: sample rejected", name, v, t)
+                return False
+        return self.gyro.push(t, pitch_rate)
+
+    def push_visual(self, meas: VisualPitch) -> None:
+        """Add a relative visual measurement (camera clock)."""
+        t, t_ref = meas.t, meas.t_ref
+        if not (math.isfinite(t) and math.isfinite(t_ref)) or t_ref >= t:
+            self.events(
+                "visual-time",
+                "visual measurement with times t_ref=%r, t=%r ignored (need t_ref < t)",
+                t_ref,
+                t,
+            )
+            return
+        if self._started and t <= self._t:
+            self.events(
+                "visual-late",
+                "visual measurement of frame t=%.6f arrived after the frame was committed",
+                t,
+            )
+            return
+        self._add_frame(t_ref)
+        self._add_frame(t)
+        good = self._is_good(meas)
+        self._vis.setdefault(t, []).append((meas, good))
+        if good:
+            self.aligner.track.add(t_ref, t, meas.dphi)
+
+    def push_vision_failure(self, t: float, reason: str) -> None:
+        """Vision gave nothing usable for the frame at ``t`` (``reason`` for the log)."""
+        if not math.isfinite(t) or (self._started and t <= self._t):
+            self.events("visual-late", "vision failure at t=%r ignored (late or not finite)", t)
+            return
+        self._add_frame(t)
+        self._fails[t] = reason
+
+    def estimate(self, t: float) -> FusedPitch:
+        """The fused pitch at frame time ``t`` (non-decreasing from call to call)."""
+        if not math.isfinite(t):
+            raise InputDataError(f"estimate(t): t = {t!r} is not a finite time")
+        if t < self._last_query:
+            raise InputDataError(
+                f"estimate(t): t = {t:.6f} s is before the previous query"
+                f" ({self._last_query:.6f} s); frame times must not go backwards"
+            )
+        if t == self._last_query and self._last_out is not None:
+            return self._last_out
+        self._last_query = t
+        self._add_frame(t)
+        if not self._started:
+            self._start(self._frames[0])
+        self._align(t)
+        self._commit(t)
+        self._ease_level(t, self._level_shift(self._sup))
+        if self._frames and self._frames[0] <= t:
+            phi, var, mode, shift = self._tentative(t)
+        else:
+            phi, var = self._bk_output()
+            mode, shift = self._sup.mode, 0.0
+        out = self._output(t, phi - shift, var, mode)
+        self._last_out = out
+        return out
+
+    @property
+    def time_offset(self) -> float:
+        """The applied camera-IMU offset (IMU stamp minus camera time), s."""
+        return self._tau
+
+    @property
+    def stats(self) -> dict[str, int]:
+        """Counts of rejected, bridged, reordered and gated inputs by kind."""
+        return dict(self.events.counts)
+
+    # -- back-end hooks ---------------------------------------------------------------------
+    @abstractmethod
+    def _bk_reset(self) -> None: ...
+
+    @abstractmethod
+    def _bk_init(self, t0: float) -> None:
+        """Start at the first frame: phi = 0 there, bias prior."""
+
+    @abstractmethod
+    def _bk_propagate(self, t: float, motion: Motion) -> None:
+        """Move the current state to time ``t`` with the gyro ``motion`` over the interval."""
+
+    @abstractmethod
+    def _bk_frame(self, t: float) -> None:
+        """The current state has reached frame ``t`` (keep it for later relative measurements)."""
+
+    @abstractmethod
+    def _bk_visual(self, meas: VisualPitch, var: float) -> bool:
+        """Fuse a measurement whose frame is the current state; False if rejected as outlier."""
+
+    def _bk_note(self, meas: VisualPitch) -> None:  # noqa: B027 - optional hook
+        """A good-quality measurement of the current frame, fused or not (key bookkeeping)."""
+
+    def _bk_frame_done(self, t: float) -> None:  # noqa: B027 - optional hook
+        """Every measurement of frame ``t`` has been handled."""
+
+    @abstractmethod
+    def _bk_output(self) -> tuple[float, float]:
+        """(phi, variance) of the current (last committed) state."""
+
+    @abstractmethod
+    def _bk_bias(self) -> tuple[float, float]:
+        """(bias, variance) of the gyro pitch-rate bias."""
+
+    def _bk_take_level_shift(self) -> float:
+        """How far the estimate of the current key frame has moved since the last call (the
+        part of the corrections that changes the absolute level, not the relative pitch)."""
+        return 0.0
+
+    def _bk_frame_estimate(self, t: float) -> tuple[float, float] | None:
+        """(phi, variance) of the committed frame ``t`` if the back end still holds it (used
+        by the extrapolated output of back ends that cannot rewind)."""
+        return None
+
+    def _bk_snapshot(self) -> Any:
+        raise NotImplementedError
+
+    def _bk_restore(self, snap: Any) -> None:
+        raise NotImplementedError
+
+    #: consecutive gated measurements that make vision lost
+    max_rejections = 5
+    #: test every fused measurement against the gyro over [t_ref, t] (back ends without a
+    #: gate of their own); re-validation after a loss always does
+    gate_with_gyro = False
+
+    # -- internals --------------------------------------------------------------------------
+    def _reset_core(self) -> None:
+        cfg = self.config
+        self._frames: list[float] = []  # pending frame times, sorted
+        self._vis: dict[float, list[tuple[VisualPitch, bool]]] = {}  # (measurement, usable)
+        self._fails: dict[float, str] = {}
+        self._started = False
+        self._t0 = math.nan
+        self._t = -math.inf  # time of the committed state
+        self._sup = ModeSupervisor(cfg.modes)
+        self._tau = cfg.alignment.initial_offset_s
+        self._tau_std = cfg.alignment.prior_std_s
+        self._tau_conf = 0.0
+        self._next_align = -math.inf
+        self._last_query = -math.inf
+        self._last_out: FusedPitch | None = None
+        # frames committed before the gyro was ready (processed again once it is)
+        self._startup: list[tuple[float, list[tuple[VisualPitch, bool]] | None, str | None]] | None
+        self._startup = []
+        self._ready = not cfg.alignment.enabled  # the gyro may be fused (offset known)
+        self._level = 0.0  # output minus state: level changes being eased in
+        self._level_t = -math.inf
+
+    def _add_frame(self, t: float) -> None:
+        frames = self._frames
+        if not frames or t > frames[-1]:
+            if not self._started or t > self._t:
+                frames.append(t)
+            return
+        if self._started and t <= self._t:
+            return
+        i = bisect.bisect_left(frames, t)
+        if i == len(frames) or frames[i] != t:
+            frames.insert(i, t)
+
+    def _start(self, t0: float) -> None:
+        self._started = True
+        self._t0 = t0
+        self._t = t0
+        self._bk_init(t0)
+        self._bk_frame(t0)
+        self._frames.pop(0)
+        alive = self._alive(t0)
+        self._handle_frame_inputs(t0, self._sup, apply=True, imu_ok=alive)
+        self._sup.update_mode(alive)
+        self._vis.pop(t0, None)
+        self._fails.pop(t0, None)
+
+    def _gyro_ready(self, t: float) -> bool:
+        """The gyro is fused once the time offset is known (or the wait is over)."""
+        if not self._ready:
+            a = self.config.alignment
+            self._ready = self._tau_conf > 0.0 or t - self._t0 >= a.max_wait_s
+        return self._ready
+
+    def _alive(self, t: float) -> bool:
+        """Is the IMU usable at camera time ``t`` (ready, and judged by the newest sample)?"""
+        if not self._gyro_ready(t):
+            return False
+        newest = self.gyro.newest
+        timeout = self.config.gyro.timeout_s
+        if newest is None:
+            return t - self._t0 <= timeout
+        return newest - self._tau >= t - timeout
+
+    def _motion(self, t1: float, t2: float, alive: bool) -> Motion:
+        if not alive:
+            d = t2 - t1
+            return Motion(0.0, (self.config.gyro.blind_rate_std_rad_s * d) ** 2, 0.0)
+        return self.gyro.motion(t1 + self._tau, t2 + self._tau)
+
+    def _align(self, t: float) -> None:
+        cfg = self.config.alignment
+        if not cfg.enabled or t < self._next_align:
+            return
+        first = self._tau_conf == 0.0
+        self._next_align = t + (min(0.5, cfg.update_period_s) if first else cfg.update_period_s)
+        est = self.aligner.estimate(self.gyro)
+        if est is None:
+            return
+        if est.correlation >= cfg.min_correlation:
+            if abs(est.offset_s - self._tau) > 0.5 * cfg.step_s:
+                log.info(
+                    "fusion[%s]: camera-IMU offset %.4f s (correlation %.3f, %d increments)",
+                    self.name,
+                    est.offset_s,
+                    est.correlation,
+                    est.n_increments,
+                )
+            self._tau = est.offset_s
+            self._tau_conf = est.correlation
+            self._tau_std = max(est.std_s, cfg.min_std_s)
+
+    def _commit(self, t: float) -> None:
+        newest = self.gyro.newest
+        gcfg = self.config.gyro
+        ready = self._gyro_ready(t)
+        if not ready:
+            horizon = t  # gyro not fused yet (offset unknown): nothing to wait for
+        elif newest is None:
+            horizon = t if t - self._t0 > gcfg.timeout_s else self._t0
+        elif t - (newest - self._tau) > gcfg.timeout_s:
+            horizon = t  # IMU lost: bridge without gyro
+        else:
+            horizon = min(t, newest - self._tau - gcfg.reorder_window_s)
+        if ready and self._startup is not None:
+            self._rerun_startup()
+        frames = self._frames
+        n = 0
+        while n < len(frames) and frames[n] <= horizon:
+            tf = frames[n]
+            self._process_frame(tf, self._sup, apply=True)
+            n += 1
+        if n:
+            for tf in frames[:n]:
+                vis = self._vis.pop(tf, None)
+                fail = self._fails.pop(tf, None)
+                if not ready and self._startup is not None:
+                    self._startup.append((tf, vis, fail))
+            del frames[:n]
+            if self._startup is not None and self._t - self._t0 > gcfg.history_s - 1.0:
+                self._startup = None  # too long ago: the gyro history no longer covers it
+        if ready:  # gyro up to here is spent: later samples for it are late
+            self.gyro.floor = max(self.gyro.floor, self._t + self._tau)
+        self.gyro.trim(max(self.gyro.floor, self._t + self._tau) - gcfg.history_s)
+
+    def _rerun_startup(self) -> None:
+        """The offset has just become known: process the frames since the start again, now
+        with the gyro, so that the bias is learnt from the first frame on. The output does
+        not step: the change enters as a level change (eased in)."""
+        frames, self._startup = self._startup, None
+        if not frames:
+            return
+        phi_before = self._bk_output()[0]
+        self._bk_take_level_shift()
+        self._sup = ModeSupervisor(self.config.modes)
+        self._t = self._t0
+        self._bk_init(self._t0)
+        self._bk_frame(self._t0)
+        for tf, vis, fail in frames:
+            if vis is not None:
+                self._vis[tf] = vis
+            if fail is not None:
+                self._fails[tf] = fail
+            self._process_frame(tf, self._sup, apply=True)
+            self._vis.pop(tf, None)
+            self._fails.pop(tf, None)
+        self._bk_take_level_shift()
+        self._level -= self._bk_output()[0] - phi_before
+        log.info(
+            "fusion[%s]: camera-IMU offset known (%.4f s): %d startup frames processed again"
+            " with the gyro",
+            self.name,
+            self._tau,
+            len(frames),
+        )
+
+    def _process_frame(
+        self, tf: float, sup: ModeSupervisor, *, apply: bool
+    ) -> tuple[bool, list[tuple[VisualPitch, float]]]:
+        """Advance to frame ``tf`` and handle its visual results (``apply``: in the back end;
+        else only decide). Returns the IMU liveness and the measurements to fuse."""
+        alive = self._alive(tf)
+        if apply:
+            self._bk_propagate(tf, self._motion(self._t, tf, alive))
+            self._t = tf
+            self._bk_frame(tf)
+        fuse = self._handle_frame_inputs(tf, sup, apply=apply, imu_ok=alive)
+        sup.update_mode(alive)
+        if apply:
+            self._bk_frame_done(tf)
+        return alive, fuse
+
+    def _handle_frame_inputs(
+        self, tf: float, sup: ModeSupervisor, *, apply: bool, imu_ok: bool
+    ) -> list[tuple[VisualPitch, float]]:
+        """Decide per measurement of frame ``tf`` (trust, gyro check) and fuse the accepted
+        ones when ``apply``; returns them with their variances."""
+        fuse: list[tuple[VisualPitch, float]] = []
+        metas = self._vis.get(tf)
+        if metas:
+            for m, good in metas:
+                if not good:
+                    sup.bad_frame(tf)
+                    continue
+                if apply:
+                    self._bk_note(m)
+                var = self._meas_var(m, imu_ok)
+                checked = self.gate_with_gyro or sup.trust is not VisionTrust.TRUSTED
+                consistent = self._consistent(m, var, imu_ok) if checked else True
+                if sup.trusted() and not consistent:  # an outlier against the gyro
+                    if apply:
+                        self.events(
+                            "gated",
+                            "visual measurement at t=%.6f disagrees with the gyro: not fused",
+                            m.t,
+                        )
+                    sup.gated(True, self.max_rejections)
+                    continue
+                if sup.good_frame(tf, consistent):
+                    fuse.append((m, var))
+                    if apply:
+                        accepted = self._bk_visual(m, var)
+                        sup.gated(not accepted, self.max_rejections)
+        elif tf in self._fails:
+            sup.bad_frame(tf)
+        else:
+            sup.no_news(tf)
+        return fuse
+
+    def _is_good(self, m: VisualPitch) -> bool:
+        """Usable: the front end says so and the numbers make sense (else logged)."""
+        if not m.quality_ok:
+            return False
+        vcfg = self.config.vision
+        ok = (
+            math.isfinite(m.dphi)
+            and abs(m.dphi) <= vcfg.max_abs_dphi_rad
+            and math.isfinite(m.std)
+            and m.std > 0.0
+            and math.isfinite(m.inlier_ratio)
+            and m.inlier_ratio >= vcfg.min_inlier_ratio
+        )
+        if not ok:
+            self.events(
+                "visual-bad",
+                "visual measurement t=%.6f (dphi=%r, std=%r, inliers=%r) unusable: a failure",
+                m.t,
+                m.dphi,
+                m.std,
+                m.inlier_ratio,
+            )
+        return ok
+
+    def _meas_var(self, m: VisualPitch, imu_ok: bool) -> float:
+        """Variance of a measurement: the estimator's, inflated for few inliers, plus the
+        part of the gyro that a time-offset error would move: (σ_τ Δω)²."""
+        vcfg = self.config.vision
+        var = max(m.std, vcfg.min_std_rad) ** 2
+        if m.inlier_ratio < vcfg.low_inlier_ratio:
+            var *= (vcfg.low_inlier_ratio / m.inlier_ratio) ** 2
+        if imu_ok and self.gyro.newest is not None:
+            dw = self.gyro.rate_at(m.t + self._tau) - self.gyro.rate_at(m.t_ref + self._tau)
+            var += (self._tau_std * dw) ** 2
+        return var
+
+    def _consistent(self, m: VisualPitch, var: float, imu_ok: bool) -> bool:
+        """Re-validation: does the visual increment agree with the gyro over [t_ref, t]?"""
+        if not imu_ok or not self.gyro.covers(m.t_ref + self._tau):
+            return True  # nothing to check against (no gyro, or the key is too old)
+        mo = self.gyro.motion(m.t_ref + self._tau, m.t + self._tau)
+        b, bvar = self._bk_bias()
+        pred = mo.dG - b * mo.dM
+        tot = var + mo.dV + mo.dM * mo.dM * bvar
+        return abs(m.dphi - pred) <= self.config.modes.consistency_sigma * math.sqrt(tot)
+
+    def _tentative(self, t: float) -> tuple[float, float, FusionMode, float]:
+        """Output for frames beyond the commit horizon, without committing them:
+        (phi, variance, mode, level shift of the key frame meanwhile)."""
+        frames = [f for f in self._frames if f <= t]
+        if self.can_rewind:
+            snap = (self._bk_snapshot(), self._t, replace(self._sup))
+            try:
+                for tf in frames:
+                    self._process_frame(tf, self._sup, apply=True)
+                phi, var = self._bk_output()
+                return phi, var, self._sup.mode, self._level_shift(self._sup)
+            finally:
+                bk, self._t, self._sup = snap
+                self._bk_restore(bk)
+        # back ends that cannot copy their state: the gyro from the newest committed state,
+        # each accepted visual measurement fused by its variance against the key frame's
+        # estimate (committed or extrapolated here), their correlation neglected
+        sup = replace(self._sup)
+        phi, var = self._bk_output()
+        b, bvar = self._bk_bias()
+        t_prev = self._t
+        head: dict[float, tuple[float, float]] = {}
+        for tf in frames:
+            alive, fuse = self._process_frame(tf, sup, apply=False)
+            mo = self._motion(t_prev, tf, alive)
+            phi += mo.dG - b * mo.dM
+            var += mo.dV + mo.dM * mo.dM * bvar
+            for m, r in fuse:
+                ref = head.get(m.t_ref) or self._bk_frame_estimate(m.t_ref)
+                if ref is not None:
+                    v_vis = ref[1] + r
+                    phi = (phi * v_vis + (ref[0] + m.dphi) * var) / (var + v_vis)
+                    var = var * v_vis / (var + v_vis)
+            head[tf] = (phi, var)
+            t_prev = tf
+        return phi, var, sup.mode, 0.0
+
+    def _level_shift(self, sup: ModeSupervisor) -> float:
+        """The key frame's estimate moved by the back end's shift: a level change to ease in
+        shortly after a re-acquisition; otherwise the state is output as it is."""
+        shift = self._bk_take_level_shift()
+        window = self.config.modes.level_capture_s
+        return shift if self._t - sup.reacquired_t <= window else 0.0
+
+    def _ease_level(self, t: float, shift: float) -> None:
+        """Decay the level offset (time constant `ModeConfig.level_ease_s`) and take in a new
+        shift of the key frame's estimate, so that the output does not step with it."""
+        tc = self.config.modes.level_ease_s
+        if tc <= 0.0:
+            self._level = 0.0
+            return
+        if self._level != 0.0:
+            self._level *= math.exp(-(t - self._level_t) / tc)
+            if abs(self._level) < 1e-12:
+                self._level = 0.0
+        self._level_t = t
+        self._level -= shift
+
+    def _output(self, t: float, phi: float, var: float, mode: FusionMode) -> FusedPitch:
+        b, bvar = self._bk_bias()
+        level = self._level
+        return FusedPitch(
+            t=t,
+            phi=phi + level,
+            std=math.sqrt(max(var, 0.0)),
+            mode=mode,
+            bias=b,
+            time_offset=self._tau,
+            time_offset_confidence=self._tau_conf,
+            bias_std=math.sqrt(max(bvar, 0.0)),
+        )

@@ -1,0 +1,125 @@
+"""The `kalman` back end: gyro prediction, stochastic clones, gating, measurement noise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+
+from roadpreview.fusion import VisualPitch, make_fusion
+from roadpreview.fusion.config import AlignmentConfig, GyroConfig, KalmanConfig
+from roadpreview.fusion.gyro import GyroHistory
+from roadpreview.fusion.kalman import GyroPitchKalmanFilter
+
+DEG = math.pi / 180.0
+
+
+def test_prediction_equals_filterpy_predict_at_imu_rate() -> None:
+    """The gyro drives the prediction at IMU rate: composing the interval from the running
+    integral gives what filterpy's predict gives sample by sample (x exactly; P to 1e-6:
+    the bias walk enters in continuous time rather than in 10 ms steps: 1e-6 relative)."""
+    rng = np.random.default_rng(1)
+    cfg = GyroConfig(rate_hz=100.0)
+    n = 37  # a frame interval and then some
+    t = 0.01 * np.arange(1, n + 1)
+    w = rng.normal(0.0, 0.05, n)
+    g = GyroHistory(cfg)
+    for ti, wi in zip(t, w, strict=True):
+        g.push(float(ti), float(wi))
+
+    ref = KalmanFilter(dim_x=2, dim_z=1)
+    ref.x = np.array([[0.01], [0.002]])
+    ref.P = np.diag([1e-6, 1e-5])
+    q = 0.5 * cfg.noise_density**2
+    for wi in w[1:]:  # each sample is the mean rate over the 10 ms before it
+        F = np.array([[1.0, -0.01], [0.0, 1.0]])
+        ref.predict(
+            u=np.array([[wi]]),
+            B=np.array([[0.01], [0.0]]),
+            F=F,
+            Q=np.diag([q * 0.01, cfg.bias_random_walk**2 * 0.01]),
+        )
+
+    kf = GyroPitchKalmanFilter(KalmanConfig(gyro=cfg))
+    kf._bk_init(t[0])
+    kf.kf.x[:2] = [[0.01], [0.002]]
+    kf.kf.P[:2, :2] = np.diag([1e-6, 1e-5])
+    kf._t = float(t[0])
+    kf._bk_propagate(float(t[-1]), g.motion(float(t[0]), float(t[-1])))
+    assert kf.kf.x[0, 0] == pytest.approx(ref.x[0, 0], abs=1e-15)
+    assert kf.kf.x[1, 0] == pytest.approx(ref.x[1, 0], abs=1e-15)
+    assert np.allclose(kf.kf.P[:2, :2], ref.P, rtol=1e-5, atol=1e-18)
+
+
+def test_relative_measurements_recover_the_pitch_exactly(kit) -> None:  # type: ignore[no-untyped-def]
+    """Noiseless gyro and vision against key frames renewed every 0.5 s: the output is the
+    truth to within what one gyro sample resolves between frame times (a relative
+    measurement used as absolute, or a key frame re-anchored wrongly, would be off by the
+    key frame's pitch, up to a degree here)."""
+    d = kit.synthetic(8.0, bias_deg_s=0.0, gyro_noise_deg_s=0.0, offset_s=0.0)
+    f = make_fusion("kalman", alignment={"enabled": False})
+    r = kit.replay(f, d, kit.front_end(d, std_deg=1e-6, key_every_s=0.5))
+    err = np.degrees(np.abs(r.phi - d.pitch))
+    assert err.max() < 0.003
+    assert np.degrees(np.ptp(d.pitch)) > 0.5
+
+
+def test_renewing_the_key_frame_injects_no_step(kit) -> None:  # type: ignore[no-untyped-def]
+    """Noisy vision, key frames every 2 s: the frame-to-frame error change at a key renewal
+    is no larger than anywhere else."""
+    d = kit.synthetic(20.0, seed=3)
+    fe = kit.front_end(d, key_every_s=2.0)
+    r = kit.replay(make_fusion("kalman"), d, fe)
+    derr = np.abs(np.diff(r.error_deg(d)))
+    refs = np.array([m.t_ref if m is not None else np.nan for m in fe.meas])
+    renewal = np.flatnonzero(np.diff(refs) > 0) + 1  # first frame against a new key
+    renewal = renewal[r.t[renewal] > 4.0]
+    others = np.setdiff1d(np.arange(120, derr.size), renewal - 1)
+    assert renewal.size >= 6
+    assert derr[renewal - 1].max() < 0.01
+    assert derr[renewal - 1].max() < 3.0 * np.percentile(derr[others], 99)
+
+
+def test_an_outlier_is_gated(kit) -> None:  # type: ignore[no-untyped-def]
+    """A gross visual error (+0.5 deg on one frame) is rejected by the Mahalanobis gate."""
+    d = kit.synthetic(12.0, seed=4)
+    i = 300
+    fe = kit.front_end(d, outliers={i: 0.5 * DEG})
+    known = {
+        "alignment": {"enabled": False, "initial_offset_s": d.time_offset_s, "prior_std_s": 0.0005}
+    }
+    f = make_fusion("kalman", **known)
+    r = kit.replay(f, d, fe)
+    err = np.abs(r.error_deg(d))
+    assert f.stats.get("gated") == 1
+    assert err[i] < 0.02
+    # exactly as if vision had failed on that frame
+    fe_fail = kit.front_end(d)
+    fe_fail.meas[i] = None
+    fe_fail.failure[i] = "poor fit"
+    without = kit.replay(make_fusion("kalman", **known), d, fe_fail)
+    assert np.array_equal(r.phi, without.phi)
+
+
+def _one_update(inlier_ratio: float) -> float:
+    """Correction of the pitch by one visual measurement 0.05 deg away from the prediction."""
+    f = GyroPitchKalmanFilter(KalmanConfig(alignment=AlignmentConfig(enabled=False)))
+    f.estimate(0.0)
+    for k in range(1, 11):
+        f.push_gyro(k * 0.01, 0.0)
+    f.push_visual(VisualPitch(0.0, 0.1, 0.05 * DEG, 0.01 * DEG, inlier_ratio, True))
+    return f.estimate(0.1).phi
+
+
+def test_measurement_noise_follows_the_estimator_std_and_inlier_ratio() -> None:
+    """Per-call R: the estimator's std, inflated when few points are inliers."""
+    good, poor = _one_update(0.9), _one_update(0.2)
+    assert 0 < poor < good < 0.05 * DEG
+
+
+def test_the_filter_is_filterpys() -> None:
+    f = GyroPitchKalmanFilter()
+    assert isinstance(f.kf, KalmanFilter)
+    assert f.kf.dim_x == 2 + KalmanConfig().n_clones
