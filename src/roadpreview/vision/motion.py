@@ -291,8 +291,9 @@ class MotionLeadFinder:
         ref = self._reference(ctx.t)
         self._remember(ctx)
         self.diagnostics = MotionDiagnostics()
-        if ref is None:
-            self.last_reason = "motion finder needs an earlier frame"
+        if ref is None or ctx.t - ref.t < 0.5 * self.config.baseline_s:
+            # one frame of history is too little parallax: a box found then is unreliable
+            self.last_reason = "motion finder needs an earlier frame (baseline_s of history)"
             return []
         if ref.small.shape != ctx.small.shape:
             self.last_reason = "frame size changed"

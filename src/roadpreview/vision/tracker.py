@@ -35,7 +35,15 @@ from numpy.typing import NDArray
 
 from roadpreview.camera import CameraModel
 from roadpreview.configtools import check_ranges, param
-from roadpreview.vision.base import F32, F64, Box, Detection, FrameContext, box_iou, clip_box
+from roadpreview.vision.base import (
+    F32,
+    F64,
+    Box,
+    Detection,
+    FrameContext,
+    box_iou,
+    clip_box,
+)
 from roadpreview.vision.features import corner_strength, track_fb
 
 
@@ -72,6 +80,12 @@ class LeadTrackerConfig:
     )
     min_box_px: float = param(8.0, unit="px", gt=0.0, help="smaller detections are ignored")
     match_iou: float = param(0.3, gt=0.0, le=1.0, help="a detection this close is the target")
+    max_box_width_frac: float = param(
+        0.6,
+        gt=0.0,
+        le=1.0,
+        help="a tracked box wider than this share of the image is no car ahead: track lost",
+    )
     box_refresh: float = param(
         0.5, ge=0.0, le=1.0, help="weight of a matching detection's box in the tracked box"
     )
@@ -490,6 +504,8 @@ class LeadVehicleTracker:
         box = clip_box(nb, W, H)
         if box is None or (box[2] - box[0]) < 2 or (box[3] - box[1]) < 2:
             return "the lead left the image", False
+        if box[2] - box[0] > cfg.max_box_width_frac * W:
+            return "track lost (the box grew over the road)", False
         self._box = box
         self._points = b[inl].astype(np.float32)
         if n_in < cfg.reseed_fraction * self._n_seeded and self._seed(gray, self._box, None):
