@@ -214,6 +214,17 @@ class WindowedStdDetector:
         confirmed += self._nms_suppressed.push(t, other, describe)
         return [replace(e, t_emit_s=t) for e in confirmed]
 
+    def restart(self) -> list[AnomalyEvent]:
+        """A new target (the tracker switched vehicles): confirm pending peaks and start an
+        empty window, so that the jump between two vehicles' trajectories is not a bump."""
+        events = self.flush()
+        self._moments = WindowedMoments(
+            self.config.window_s, 3, aux_columns=4, recompute_every=self.config.recompute_every
+        )
+        self._nms = PeakPicker(self.config.nms_window_s)
+        self._nms_suppressed = PeakPicker(self.config.nms_window_s)
+        return events
+
     def flush(self) -> list[AnomalyEvent]:
         """End of stream: pending peaks, confirmed at the last frame's time."""
         pending = self._nms.flush() + self._nms_suppressed.flush()

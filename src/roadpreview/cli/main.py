@@ -20,6 +20,7 @@ from roadpreview.errors import RoadPreviewError
 COMMANDS: dict[str, str] = {
     "demo": "roadpreview.cli.demo",
     "simulate": "roadpreview.cli.simulate",
+    "replay": "roadpreview.cli.replay",
     "bench": "roadpreview.cli.bench",
 }
 

@@ -1,0 +1,112 @@
+"""The pipeline's one configuration file (``roadpreview.toml``): every part's settings.
+
+Each part keeps its own typed dataclass next to its code (vision, pitch,
+fusion, anomaly); this module gathers them into `PipelineConfig`, loads it
+from TOML with unknown keys rejected (errors name the key and the file) and
+applies command-line overrides. ``data/roadpreview.example.toml`` is the
+documented example.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from roadpreview import configtools
+from roadpreview.anomaly.config import AnomalyConfig
+from roadpreview.configtools import param
+from roadpreview.vision.frontend import VisionConfig
+
+
+@dataclass(frozen=True)
+class PitchStageConfig:
+    """``[pitch]``: which estimator and its options (see ``roadpreview.pitch``)."""
+
+    estimator: str = param(
+        "robust", choices=("robust", "essential", "none"), help="the paper's robust LM by default"
+    )
+    options: dict[str, Any] = field(default_factory=dict)
+    min_points: int = param(
+        30, ge=5, help="fewer background pairs than this: vision failed for the fusion"
+    )
+
+
+@dataclass(frozen=True)
+class FusionStageConfig:
+    """``[fusion]``: which back end and its options (see ``roadpreview.fusion``)."""
+
+    backend: str = param(
+        "kalman",
+        choices=("kalman", "factor-graph", "visual-only", "imu-only", "none"),
+        help="filterpy Kalman filter by default",
+    )
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class CanStageConfig:
+    """``[can]``: the input mapping and the DBC; the buses of the daemon."""
+
+    dbc: str = param("", help="DBC of the input messages; empty: roadpreview's own")
+    mapping: str = param(
+        "roadpreview", help="mapping file, or a shipped name: roadpreview, toyota_rav4"
+    )
+    input_interface: str = param("socketcan", help="python-can interface of the input bus")
+    input_channel: str = param("can0", help="channel of the input bus")
+    output_interface: str = param("", help="output bus interface; empty: the input bus")
+    output_channel: str = param("", help="output bus channel; empty: the input bus")
+    status_period_s: float = param(0.1, unit="s", gt=0.0, le=10.0, help="RP_STATUS cycle")
+    imu_timeout_s: float = param(
+        0.5, unit="s", gt=0.0, help="no gyro sample for this long: the IMU is gone (watchdog)"
+    )
+
+
+@dataclass(frozen=True)
+class LeadKinematicsConfig:
+    """How the lead's acceleration is estimated (for the braking suppression)."""
+
+    window_s: float = param(
+        1.5, unit="s", gt=0.1, le=5.0, help="quadratic fit of the lead distance over this window"
+    )
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Everything the pipeline needs besides the camera calibration."""
+
+    vision: VisionConfig = field(default_factory=VisionConfig)
+    pitch: PitchStageConfig = field(default_factory=PitchStageConfig)
+    fusion: FusionStageConfig = field(default_factory=FusionStageConfig)
+    anomaly: AnomalyConfig = field(default_factory=AnomalyConfig)
+    can: CanStageConfig = field(default_factory=CanStageConfig)
+    lead: LeadKinematicsConfig = field(default_factory=LeadKinematicsConfig)
+
+    def validate(self, where: str = "") -> None:
+        if not where:
+            configtools.check_ranges(self)
+
+    @classmethod
+    def load(cls, path: str | Path) -> PipelineConfig:
+        """Read a configuration file; errors name the file and the key."""
+        return configtools.load(cls, path)
+
+    def save(self, path: str | Path) -> None:
+        configtools.save(self, path)
+
+    def with_overrides(
+        self,
+        *,
+        finder: str | None = None,
+        estimator: str | None = None,
+        fusion: str | None = None,
+    ) -> PipelineConfig:
+        """Command-line flags override the file."""
+        cfg = self
+        if finder is not None:
+            cfg = replace(cfg, vision=replace(cfg.vision, finder=finder))
+        if estimator is not None:
+            cfg = replace(cfg, pitch=replace(cfg.pitch, estimator=estimator))
+        if fusion is not None:
+            cfg = replace(cfg, fusion=replace(cfg.fusion, backend=fusion))
+        return cfg

@@ -1,0 +1,351 @@
+"""`Pipeline`: frames and CAN/IMU samples in (timestamp order), trajectory, pitch, modes,
+detector output and alerts out. The same object serves replay, the daemon and the demo.
+
+Per frame (``push_frame``):
+
+1. vision: lead observation y(t) (and halves, box, distance) and background
+   correspondences against the current key frame, with a texture measure;
+2. pitch: the robust estimator on the key-frame correspondences (relative
+   pitch since the key frame; warm start reset when the key frame is renewed);
+3. fusion: the visual measurement (or a vision failure) with the gyro samples
+   pushed so far -> φ(t), its std, the mode, the gyro bias, the time offset;
+4. compensation ``y_c = y - f tan φ`` (paper eq. 4), also for the halves;
+5. detector: s(t) (paper eq. 1), threshold, NMS -> events -> alerts.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import can
+import numpy as np
+
+from roadpreview.anomaly import AlertBuilder, TrajectorySample, WindowedStdDetector
+from roadpreview.anomaly.alert import Alert
+from roadpreview.anomaly.base import AnomalyEvent, SuppressionReason
+from roadpreview.camera import CameraModel
+from roadpreview.canbus import load_database
+from roadpreview.canbus.decode import CanInputDecoder
+from roadpreview.canbus.mapping import load_mapping
+from roadpreview.canbus.output import Status
+from roadpreview.canbus.samples import ImuSample, SpeedSample
+from roadpreview.fusion import FusedPitch, VisualPitch, compensation, make_fusion
+from roadpreview.fusion.mode import FusionMode
+from roadpreview.pipeline.config import PipelineConfig
+from roadpreview.pitch import make_estimator
+from roadpreview.vision.frontend import VisionFrontEnd
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """Everything the pipeline knows about one frame."""
+
+    t: float
+    index: int
+    y: float
+    y_left: float
+    y_right: float
+    y_c: float
+    phi: float
+    phi_std: float
+    mode: FusionMode
+    bias: float
+    time_offset: float
+    s: float
+    s_left: float
+    s_right: float
+    threshold_px: float
+    suppressed: SuppressionReason
+    lead_found: bool
+    lead_distance_m: float
+    lead_box: tuple[float, float, float, float] | None
+    n_lead_points: int
+    n_background: int
+    textured: bool
+    vision_reason: str
+    pitch_reason: str
+    target_changed: bool
+    lead_accel_mps2: float | None
+    ego_speed_mps: float | None
+    events: tuple[AnomalyEvent, ...] = ()
+    alerts: tuple[Alert, ...] = ()
+
+    #: columns of the per-frame table, in order
+    COLUMNS = (
+        "t",
+        "index",
+        "y",
+        "y_left",
+        "y_right",
+        "y_c",
+        "phi",
+        "phi_std",
+        "mode",
+        "bias",
+        "time_offset",
+        "s",
+        "s_left",
+        "s_right",
+        "threshold_px",
+        "suppressed",
+        "lead_found",
+        "lead_distance_m",
+        "n_lead_points",
+        "n_background",
+        "textured",
+        "n_events",
+    )
+
+    def row(self) -> list[Any]:
+        """The frame as a row of the per-frame table (`COLUMNS`)."""
+        return [
+            self.t,
+            self.index,
+            self.y,
+            self.y_left,
+            self.y_right,
+            self.y_c,
+            self.phi,
+            self.phi_std,
+            self.mode.name,
+            self.bias,
+            self.time_offset,
+            self.s,
+            self.s_left,
+            self.s_right,
+            self.threshold_px,
+            int(self.suppressed),
+            int(self.lead_found),
+            self.lead_distance_m,
+            self.n_lead_points,
+            self.n_background,
+            int(self.textured),
+            len(self.events),
+        ]
+
+
+class _LeadKinematics:
+    """The lead's longitudinal acceleration = the ego's + the second derivative of the
+    gap, from a quadratic fit of the distance over a sliding window (robust to the
+    frame-to-frame noise of the distance estimate)."""
+
+    def __init__(self, window_s: float) -> None:
+        self.window_s = window_s
+        self._t: deque[float] = deque()
+        self._d: deque[float] = deque()
+
+    def reset(self) -> None:
+        self._t.clear()
+        self._d.clear()
+
+    def push(self, t: float, distance_m: float, ego_accel: float | None) -> float | None:
+        if math.isfinite(distance_m):
+            self._t.append(t)
+            self._d.append(distance_m)
+        while self._t and self._t[0] < t - self.window_s:
+            self._t.popleft()
+            self._d.popleft()
+        if len(self._t) < 8 or self._t[-1] - self._t[0] < 0.5 * self.window_s:
+            return None
+        tt = np.fromiter(self._t, float) - t
+        coef, cov = np.polyfit(tt, np.fromiter(self._d, float), 2, cov=True)
+        rel = 2.0 * float(coef[0])
+        rel_std = 2.0 * math.sqrt(max(float(cov[0, 0]), 0.0))
+        # shrink towards zero by two standard deviations: distance noise is not braking
+        rel = math.copysign(max(abs(rel) - 2.0 * rel_std, 0.0), rel)
+        return rel + (ego_accel or 0.0)
+
+
+@dataclass
+class _Speed:
+    t: float = math.nan
+    v: float = math.nan
+    accel: float | None = None
+    history: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=64))
+
+    def push(self, t: float, v: float) -> None:
+        if not math.isfinite(v):
+            return
+        self.history.append((t, v))
+        self.t, self.v = t, v
+        old = [(tt, vv) for tt, vv in self.history if tt >= t - 0.5]
+        if len(old) >= 3 and old[-1][0] - old[0][0] > 0.1:
+            self.accel = (old[-1][1] - old[0][1]) / (old[-1][0] - old[0][0])
+
+
+class Pipeline:
+    """The streaming estimator (module docstring). Push in timestamp order."""
+
+    def __init__(self, camera: CameraModel, config: PipelineConfig | None = None) -> None:
+        self.camera = camera
+        self.config = config or PipelineConfig()
+        cfg = self.config
+        self.vision = VisionFrontEnd(camera, cfg.vision)
+        self.pitch = make_estimator(cfg.pitch.estimator, camera, **cfg.pitch.options)
+        self.fusion = make_fusion(cfg.fusion.backend, **cfg.fusion.options)
+        det_cfg = cfg.anomaly.detector
+        if det_cfg.signal.focal_px is None:
+            det_cfg = replace(det_cfg, signal=replace(det_cfg.signal, focal_px=camera.fy))
+        self.detector = WindowedStdDetector(det_cfg)
+        self.alert_builder = AlertBuilder(cfg.anomaly.alert, signal=det_cfg.signal)
+        db = load_database(cfg.can.dbc or None, strict=not cfg.can.dbc)
+        self.can_decoder = CanInputDecoder(
+            db, load_mapping(cfg.can.mapping), db_name=cfg.can.dbc or "roadpreview.dbc"
+        )
+        for quantity, why in self.can_decoder.missing.items():
+            log.warning("CAN input: %s is not available (%s)", quantity, why)
+        self._lead = _LeadKinematics(cfg.lead.window_s)
+        self._speed = _Speed()
+        self._key_index = -1
+        self._phi = 0.0
+        self._last_gyro_t = -math.inf
+        self.frames = 0
+        self.alerts_sent = 0
+        self.last: FrameResult | None = None
+
+    # -- inputs ---------------------------------------------------------------------
+    def push_can(self, msg: can.Message) -> None:
+        """A received CAN frame (any ID: unknown or broken frames are counted and skipped)."""
+        for sample in self.can_decoder.decode(msg):
+            if isinstance(sample, ImuSample):
+                self.push_imu(sample)
+            elif isinstance(sample, SpeedSample):
+                self.push_speed(sample)
+
+    def push_imu(self, sample: ImuSample) -> None:
+        roll, pitch, yaw = sample.rates_rad_s
+        if math.isfinite(pitch):
+            self.fusion.push_gyro(
+                sample.t_s,
+                pitch,
+                roll_rate=roll if math.isfinite(roll) else None,
+                yaw_rate=yaw if math.isfinite(yaw) else None,
+            )
+            self._last_gyro_t = sample.t_s
+
+    def push_speed(self, sample: SpeedSample) -> None:
+        self._speed.push(sample.t_s, sample.speed_mps)
+
+    # -- the frame step -----------------------------------------------------------------
+    def push_frame(self, t: float, frame: Any) -> FrameResult:
+        """Process one camera frame taken at ``t`` (BGR uint8; None or garbage: no target)."""
+        cfg = self.config
+        fv = self.vision.process(t, frame, pitch_rad=self._phi)
+        bg = fv.background
+        pitch_reason = ""
+        if bg.key_index != self._key_index:
+            self._key_index = bg.key_index
+            self.pitch.reset()  # the relative pitch starts again near zero
+        n_bg = 0 if bg.x_cur is None else len(bg.x_cur)
+        if fv.reason:
+            pitch_reason = fv.reason
+        elif not bg.quality.textured:
+            pitch_reason = f"low texture: {bg.quality.reason}"
+        elif n_bg < cfg.pitch.min_points:
+            pitch_reason = f"{n_bg} background points < {cfg.pitch.min_points}"
+        if not pitch_reason and bg.x_key is not None:
+            est = self.pitch.estimate(bg.x_key, bg.x_cur)
+            if est:
+                self.fusion.push_visual(VisualPitch.from_estimate(bg.key_t, t, est))
+            else:
+                pitch_reason = est.reason
+        if pitch_reason:
+            self.fusion.push_vision_failure(t, pitch_reason)
+        fused: FusedPitch = self.fusion.estimate(t)
+        phi = fused.phi if math.isfinite(fused.phi) else 0.0
+        self._phi = phi
+
+        lead = fv.lead
+        f = self.camera.fy
+        y_c, y_c_l, y_c_r = (
+            float(compensation(v, phi, f)) if math.isfinite(v) else math.nan
+            for v in (lead.y, lead.y_left, lead.y_right)
+        )
+        ego_speed = self._speed.v if math.isfinite(self._speed.v) else None
+        if lead.target_changed:
+            self._lead.reset()
+        lead_accel = self._lead.push(t, lead.distance_m, self._speed.accel)
+        sample = TrajectorySample(
+            t=t,
+            y_c=y_c,
+            y_c_left=y_c_l,
+            y_c_right=y_c_r,
+            lead_distance_m=lead.distance_m,
+            lead_distance_std_m=lead.distance_std_m,
+            mode=fused.mode,
+            lead_accel_mps2=lead_accel,
+            ego_speed_mps=ego_speed,
+            valid=bool(lead) and math.isfinite(y_c),
+        )
+        events = self.detector.restart() if lead.target_changed else []
+        events += self.detector.push(sample)
+        alerts = tuple(a for a in (self.alert_builder.build(e) for e in events) if a is not None)
+        self.alerts_sent += len(alerts)
+        df = self.detector.frame
+        nan = math.nan
+        result = FrameResult(
+            t=t,
+            index=fv.index,
+            y=lead.y,
+            y_left=lead.y_left,
+            y_right=lead.y_right,
+            y_c=y_c,
+            phi=fused.phi,
+            phi_std=fused.std,
+            mode=fused.mode,
+            bias=fused.bias,
+            time_offset=fused.time_offset,
+            s=df.s if df else nan,
+            s_left=df.s_left if df else nan,
+            s_right=df.s_right if df else nan,
+            threshold_px=df.threshold_px if df else nan,
+            suppressed=df.suppressed if df else SuppressionReason.NONE,
+            lead_found=bool(lead),
+            lead_distance_m=lead.distance_m,
+            lead_box=lead.box,
+            n_lead_points=lead.n_valid,
+            n_background=n_bg,
+            textured=bool(bg.quality.textured),
+            vision_reason=fv.reason or lead.reason,
+            pitch_reason=pitch_reason,
+            target_changed=lead.target_changed,
+            lead_accel_mps2=lead_accel,
+            ego_speed_mps=ego_speed,
+            events=tuple(events),
+            alerts=alerts,
+        )
+        self.frames += 1
+        self.last = result
+        return result
+
+    def finish(self) -> list[Alert]:
+        """End of input: alerts for events still held by the non-maximum suppression."""
+        events = self.detector.flush()
+        alerts = [a for a in (self.alert_builder.build(e) for e in events) if a is not None]
+        self.alerts_sent += len(alerts)
+        return alerts
+
+    # -- status -------------------------------------------------------------------------
+    def status(self) -> Status:
+        """What ``RP_STATUS`` reports now."""
+        r = self.last
+        if r is None:
+            return Status(mode=FusionMode.DEGRADED, frames_processed=0)
+        quality = min(1.0, r.n_background / 200.0) if r.textured else 0.0
+        return Status(
+            mode=r.mode,
+            pitch_rad=r.phi if math.isfinite(r.phi) else None,
+            gyro_bias_rad_s=r.bias if math.isfinite(r.bias) else None,
+            texture_quality=quality,
+            time_offset_s=r.time_offset if math.isfinite(r.time_offset) else None,
+            suppressed=r.suppressed,
+            alerts_sent=self.alerts_sent,
+            input_errors=self.can_decoder.stats.skipped,
+            frames_processed=self.frames,
+        )

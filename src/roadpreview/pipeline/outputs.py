@@ -1,0 +1,194 @@
+"""What a replay writes: alerts as a CAN log and JSON lines, the per-frame table,
+plots, an annotated video, and a summary."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, TextIO
+
+import can
+import cv2
+import numpy as np
+
+from roadpreview.anomaly.alert import Alert
+from roadpreview.canbus import write_can_log
+from roadpreview.canbus.output import AlertEncoder, Status, StatusEncoder
+from roadpreview.fusion.mode import FusionMode
+from roadpreview.pipeline.core import FrameResult
+
+
+def alert_json(alert: Alert) -> dict[str, Any]:
+    d = asdict(alert)
+    d["side"] = alert.side.name
+    d["mode"] = alert.mode.name
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
+
+
+class FrameTableWriter:
+    """The per-frame table as CSV, written as frames come (bounded memory)."""
+
+    def __init__(self, path: Path) -> None:
+        self._fh: TextIO = path.open("w", newline="")
+        self._w = csv.writer(self._fh)
+        self._w.writerow(FrameResult.COLUMNS)
+
+    def write(self, r: FrameResult) -> None:
+        self._w.writerow([f"{v:.6g}" if isinstance(v, float) else v for v in r.row()])
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+class CanOutputLog:
+    """RP_ALERT frames as they are emitted and RP_STATUS every ``period_s``, kept in
+    memory (a few frames per second) and written to a log at the end."""
+
+    def __init__(self, period_s: float = 0.1) -> None:
+        self.period_s = period_s
+        self._alerts = AlertEncoder()
+        self._status = StatusEncoder()
+        self.messages: list[can.Message] = []
+        self._next_status = -math.inf
+
+    def frame(self, t: float, status: Status, alerts: Sequence[Alert]) -> None:
+        for a in alerts:
+            self.messages.append(self._alerts.encode(a, timestamp=t))
+        if t >= self._next_status:
+            self.messages.append(self._status.encode(status, timestamp=t))
+            self._next_status = t + self.period_s
+
+    def write(self, path: Path) -> int:
+        return write_can_log(path, self.messages)
+
+
+class SeriesRecorder:
+    """The few per-frame series the plots need, as arrays."""
+
+    def __init__(self) -> None:
+        self.cols: dict[str, list[float]] = {
+            k: [] for k in ("t", "y", "y_c", "phi", "s", "thr", "mode")
+        }
+
+    def add(self, r: FrameResult) -> None:
+        c = self.cols
+        c["t"].append(r.t)
+        c["y"].append(r.y)
+        c["y_c"].append(r.y_c)
+        c["phi"].append(r.phi)
+        c["s"].append(r.s)
+        c["thr"].append(r.threshold_px)
+        c["mode"].append(float(r.mode))
+
+
+def plot_run(
+    rec: SeriesRecorder,
+    alerts: Sequence[Alert],
+    path: Path,
+    *,
+    t0: float = 0.0,
+    truth_times: Sequence[float] = (),
+) -> None:
+    """y and y_c, pitch, s(t) with threshold and alerts, and the mode band, as one PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    c = {k: np.asarray(v, float) for k, v in rec.cols.items()}
+    t = c["t"] - t0
+    fig, ax = plt.subplots(
+        4, 1, figsize=(12, 9), sharex=True, gridspec_kw={"height_ratios": [3, 2, 3, 0.6]}
+    )
+    ax[0].plot(t, c["y"] - np.nanmedian(c["y"]), lw=0.8, label="y (lead, raw)")
+    ax[0].plot(t, c["y_c"] - np.nanmedian(c["y_c"]), lw=0.8, label="y_c (compensated)")
+    ax[0].set_ylabel("px (median removed)")
+    ax[0].invert_yaxis()
+    ax[0].legend(loc="upper right")
+    ax[1].plot(t, np.degrees(c["phi"]), lw=0.8, color="tab:green")
+    ax[1].set_ylabel("pitch φ (deg)")
+    ax[2].plot(t, c["s"], lw=0.9, label="s(t)")
+    ax[2].plot(t, c["thr"], lw=0.8, ls="--", color="k", label="threshold")
+    for i, a in enumerate(alerts):
+        ax[2].axvline(a.t_s - t0, color="tab:red", lw=1.0, label="alert" if i == 0 else None)
+    for i, tt in enumerate(truth_times):
+        ax[2].axvline(
+            tt - t0,
+            color="tab:gray",
+            lw=0.8,
+            ls=":",
+            label="lead crosses (truth)" if i == 0 else None,
+        )
+    ax[2].set_ylabel("s (px)")
+    ax[2].legend(loc="upper right")
+    colours = {
+        FusionMode.FUSED: "tab:green",
+        FusionMode.VISUAL_ONLY: "tab:blue",
+        FusionMode.IMU_ONLY: "tab:orange",
+        FusionMode.DEGRADED: "tab:red",
+    }
+    for mode, colour in colours.items():
+        ax[3].fill_between(
+            t,
+            0,
+            1,
+            where=c["mode"] == int(mode),
+            color=colour,
+            step="mid",
+            label=mode.name,
+            linewidth=0,
+        )
+    ax[3].set_yticks([])
+    ax[3].set_ylabel("mode")
+    ax[3].legend(loc="upper right", ncol=4, fontsize=7)
+    ax[3].set_xlabel("time (s)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+class AnnotatedVideoWriter:
+    """The input video with tracked box, y(t), the s(t) gauge and the mode drawn on it."""
+
+    def __init__(self, path: Path, fps: float, size: tuple[int, int]) -> None:
+        self._w = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"mp4v"), fps, size)
+        self.size = size
+
+    def write(self, frame: Any, r: FrameResult) -> None:
+        if frame is None:
+            frame = np.zeros((self.size[1], self.size[0], 3), np.uint8)
+        img = frame.copy()
+        if r.lead_box is not None:
+            x0, y0, x1, y1 = (round(v) for v in r.lead_box)
+            cv2.rectangle(img, (x0, y0), (x1, y1), (0, 255, 0), 2)
+            if math.isfinite(r.y):
+                cv2.line(img, (x0, int(r.y)), (x1, int(r.y)), (0, 255, 255), 1)
+        h = img.shape[0]
+        level = 0.0 if not math.isfinite(r.s) else min(1.0, r.s / max(2 * r.threshold_px, 1e-6))
+        cv2.rectangle(
+            img,
+            (10, h - 20),
+            (10 + int(200 * level), h - 10),
+            (0, 0, 255) if r.s > r.threshold_px else (0, 200, 0),
+            -1,
+        )
+        cv2.rectangle(img, (10, h - 20), (210, h - 10), (255, 255, 255), 1)
+        phi_deg = math.degrees(r.phi) if math.isfinite(r.phi) else 0.0
+        text = f"{r.mode.name}  phi {phi_deg:+.2f} deg  s {r.s:.2f} px"
+        cv2.putText(img, text, (10, h - 28), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1)
+        if r.alerts:
+            cv2.putText(img, "ALERT", (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 1.0, (0, 0, 255), 2)
+        self._w.write(img)
+
+    def close(self) -> None:
+        self._w.release()
+
+
+def write_jsonl(path: Path, alerts: Sequence[Alert]) -> None:
+    with path.open("w") as fh:
+        for a in alerts:
+            fh.write(json.dumps(alert_json(a)) + "\n")
