@@ -7,6 +7,7 @@ import math
 import shutil
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -48,8 +49,8 @@ def test_replay_writes_every_output_and_they_are_consistent(short_demo, tmp_path
 def test_replay_is_deterministic(short_demo, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     a = replay(ReplayInputs.from_recording(short_demo.folder), out=tmp_path / "a")
     b = replay(ReplayInputs.from_recording(short_demo.folder), out=tmp_path / "b")
-    assert (tmp_path / "a" / "frames.csv").read_bytes() == (tmp_path / "b" / "frames.csv").read_bytes()
-    assert (tmp_path / "a" / "alerts.jsonl").read_bytes() == (tmp_path / "b" / "alerts.jsonl").read_bytes()
+    for name in ("frames.csv", "alerts.jsonl"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
     assert a.mode_changes == b.mode_changes
 
 
@@ -70,23 +71,43 @@ def test_missing_video_names_the_file(short_demo, tmp_path: Path) -> None:  # ty
     folder = tmp_path / "rec"
     shutil.copytree(short_demo.folder, folder)
     (folder / "video.mp4").unlink()
-    with pytest.raises(InputDataError, match="video.mp4"):
+    with pytest.raises(InputDataError, match=r"video\.mp4"):
         replay(ReplayInputs.from_recording(folder))
     assert main(["replay", str(folder), "--out", str(tmp_path / "o")]) == 1
 
 
-def test_truncated_video_gives_outputs_for_what_was_valid(short_demo, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_truncated_video_is_a_clear_error(short_demo, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     folder = tmp_path / "rec"
     shutil.copytree(short_demo.folder, folder)
     data = (folder / "video.mp4").read_bytes()
-    (folder / "video.mp4").write_bytes(data[: len(data) // 2])
-    try:
-        result = replay(ReplayInputs.from_recording(folder), out=tmp_path / "out")
-    except InputDataError as exc:  # the container index may be lost with the tail
-        assert "video.mp4" in str(exc)
-    else:
-        assert 0 < result.frames <= short_demo.info["n_frames"]
-        assert (tmp_path / "out" / "frames.csv").is_file()
+    (folder / "video.mp4").write_bytes(data[: len(data) // 2])  # the mp4 index is lost
+    with pytest.raises(InputDataError, match=r"video\.mp4"):
+        replay(ReplayInputs.from_recording(folder))
+
+
+def test_corrupt_frame_in_the_middle_loses_no_other_frame(short_demo, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    # an MJPG AVI (frames coded independently) with one frame's bytes overwritten
+    src = cv2.VideoCapture(str(short_demo.video))
+    avi = tmp_path / "cam.avi"
+    writer = cv2.VideoWriter(str(avi), cv2.VideoWriter.fourcc(*"MJPG"), 30.0, (1280, 720))
+    for _ in range(60):
+        ok, frame = src.read()
+        assert ok
+        writer.write(frame)
+    writer.release()
+    data = bytearray(avi.read_bytes())
+    middle = len(data) // 2
+    data[middle : middle + 4000] = bytes(4000)
+    avi.write_bytes(bytes(data))
+    inputs = ReplayInputs(
+        video=avi,
+        camera=short_demo.camera,
+        can_logs=[short_demo.can_log()],
+        video_start_s=float(short_demo.info["can_t0_unix_s"]),
+    )
+    result = replay(inputs, out=tmp_path / "out")
+    assert result.frames + result.decode_failures >= 59
+    assert (tmp_path / "out" / "frames.csv").is_file()
 
 
 def test_garbage_frames_are_no_target_not_a_crash(short_demo) -> None:  # type: ignore[no-untyped-def]
