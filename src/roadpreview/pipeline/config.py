@@ -67,7 +67,12 @@ class LeadKinematicsConfig:
     """How the lead's acceleration is estimated (for the braking suppression)."""
 
     window_s: float = param(
-        1.5, unit="s", gt=0.1, le=5.0, help="quadratic fit of the lead distance over this window"
+        3.0,
+        unit="s",
+        gt=0.1,
+        le=10.0,
+        help="quadratic fit of the lead distance over this window: long enough to average out"
+        " the distance jumps of a bump (~1 s), short enough for a 1-2 s braking manoeuvre",
     )
 
 

@@ -157,8 +157,9 @@ class _LeadKinematics:
         coef, cov = np.polyfit(tt, np.fromiter(self._d, float), 2, cov=True)
         rel = 2.0 * float(coef[0])
         rel_std = 2.0 * math.sqrt(max(float(cov[0, 0]), 0.0))
-        # shrink towards zero by two standard deviations: distance noise is not braking
-        rel = math.copysign(max(abs(rel) - 2.0 * rel_std, 0.0), rel)
+        # shrink towards zero by three standard deviations: the distance estimate jumps
+        # while the lead bounces over a bump (its box moves), which is not braking
+        rel = math.copysign(max(abs(rel) - 3.0 * rel_std, 0.0), rel)
         return rel + (ego_accel or 0.0)
 
 

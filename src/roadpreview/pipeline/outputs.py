@@ -38,7 +38,11 @@ class FrameTableWriter:
         self._w.writerow(FrameResult.COLUMNS)
 
     def write(self, r: FrameResult) -> None:
-        self._w.writerow([f"{v:.6g}" if isinstance(v, float) else v for v in r.row()])
+        row = r.row()
+        # the time keeps microseconds whatever its epoch; the rest 6 significant digits
+        self._w.writerow(
+            [f"{row[0]:.6f}", *(f"{v:.6g}" if isinstance(v, float) else v for v in row[1:])]
+        )
 
     def close(self) -> None:
         self._fh.close()

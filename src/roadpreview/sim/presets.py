@@ -130,7 +130,9 @@ def texture_loss(seed: int = 0, *, duration_s: float = 60.0) -> ScenarioConfig:
 
 def demo(seed: int = 0) -> ScenarioConfig:
     """About 60 s at 720p that shows everything: the lead over bumps, a pothole and a
-    cushion, the ego on a rough road, a fog bank (the IMU has to carry the pitch)."""
+    cushion, the ego pitching over the same bumps on an ISO class B road with hills, a fog
+    bank (the IMU has to carry the pitch). On class C the lead's own bouncing rivals the
+    bumps in s(t) at the default threshold (docs/pipeline.md)."""
     anomalies = [
         paper_speed_bump(95.0),
         paper_speed_bump(175.0),
@@ -157,7 +159,7 @@ def demo(seed: int = 0) -> ScenarioConfig:
     ]
     motion = MotionConfig(
         road=RoadConfig(
-            iso_class="C",
+            iso_class="B",
             length_m=700.0,
             hill_grade_pct=2.0,
             anomalies=anomalies,
