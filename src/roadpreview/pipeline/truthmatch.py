@@ -42,6 +42,8 @@ class MatchReport:
     rows: list[MatchRow]
     false_alarms: list[Alert]
     duration_s: float
+    #: the recording's time zero on the alerts' clock (for printing)
+    t0: float = 0.0
 
     @property
     def expected(self) -> int:
@@ -72,7 +74,9 @@ class MatchReport:
                 f"{r.t_lead_s:9.2f} s  {r.distance_m:6.1f} m  {r.outcome:7s}  {lt}  {sev}"
             )
         for a in self.false_alarms:
-            lines.append(f"    -  false alarm at {a.t_s:.2f} s, severity {a.severity_px:.2f} px")
+            lines.append(
+                f"    -  false alarm at {a.t_s - self.t0:.2f} s, severity {a.severity_px:.2f} px"
+            )
         lines.append(
             f"detected {self.hits}/{self.expected} anomalies the lead crosses within range "
             f"({100 * self.recall:.0f} %), {len(self.false_alarms)} false alarm(s) "
@@ -129,4 +133,4 @@ def match_alerts(
             )
         )
     false_alarms = [a for i, a in enumerate(alerts) if i not in used]
-    return MatchReport(rows=rows, false_alarms=false_alarms, duration_s=duration_s)
+    return MatchReport(rows=rows, false_alarms=false_alarms, duration_s=duration_s, t0=t0)
