@@ -181,10 +181,7 @@ def demo(seed: int = 0) -> ScenarioConfig:
         seed=seed,
         motion=motion,
         camera=CameraSpec(width=1280, height=720),
-        conditions=[
-            # thick fog (visibility ~20 m): the background goes, the lead stays in sight
-            ConditionSegment(kind="fog", start_s=36.0, end_s=46.0, fog_density_per_m=0.15)
-        ],
+        conditions=[ConditionSegment(kind="fog", start_s=36.0, end_s=46.0)],
     )
 
 
