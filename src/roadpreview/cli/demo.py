@@ -43,8 +43,10 @@ def _run(args: argparse.Namespace) -> int:
     if reuse:
         print(f"reusing the demo drive in {rec_dir}")
     else:
-        print(f"simulating the demo drive ({cfg.motion.duration_s:.0f} s, "
-              f"{cfg.camera.width}x{cfg.camera.height}) into {rec_dir} ...")
+        print(
+            f"simulating the demo drive ({cfg.motion.duration_s:.0f} s, "
+            f"{cfg.camera.width}x{cfg.camera.height}) into {rec_dir} ..."
+        )
         info = write_recording(cfg, rec_dir)
         print(f"  {info.n_frames} frames, {info.n_can_frames} CAN frames in {info.seconds:.1f} s")
     inputs = ReplayInputs.from_recording(rec_dir)
@@ -58,6 +60,8 @@ def _run(args: argparse.Namespace) -> int:
     print(format_modes(result.mode_changes, result.video_start_s))
     print(f"\noutputs: {out / 'alerts.blf'} (RP_ALERT + RP_STATUS), {out / 'alerts.jsonl'},")
     print(f"         {out / 'frames.csv'}, {out / 'plots.png'}, {out / 'summary.json'}")
-    print(f"speed: {result.frames} frames in {result.seconds:.1f} s = {result.fps:.1f} fps "
-          f"(pipeline only); whole demo {time.perf_counter() - t0:.0f} s")
+    print(
+        f"speed: {result.frames} frames in {result.seconds:.1f} s = {result.fps:.1f} fps "
+        f"(pipeline only); whole demo {time.perf_counter() - t0:.0f} s"
+    )
     return 0

@@ -21,6 +21,7 @@ COMMANDS: dict[str, str] = {
     "demo": "roadpreview.cli.demo",
     "simulate": "roadpreview.cli.simulate",
     "replay": "roadpreview.cli.replay",
+    "run": "roadpreview.cli.run",
     "bench": "roadpreview.cli.bench",
 }
 

@@ -11,13 +11,12 @@ Back ends are chosen by name from `BACKENDS` (imported lazily)::
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
-from roadpreview.errors import ConfigError
 from roadpreview.fusion.base import FusedPitch, PitchFusion, VisualPitch
 from roadpreview.fusion.compensation import compensation
 from roadpreview.fusion.mode import FusionMode
+from roadpreview.registry import build
 
 #: config name -> (module, class, config class)
 BACKENDS: dict[str, tuple[str, str, str | None]] = {
@@ -36,23 +35,15 @@ BACKENDS: dict[str, tuple[str, str, str | None]] = {
 def make_fusion(name: str, **options: Any) -> PitchFusion:
     """Build the back end registered as ``name``; ``options`` fill its config dataclass
     (nested tables as dicts: ``gyro={"noise_density": ...}``)."""
-    try:
-        module_name, cls_name, cfg_name = BACKENDS[name]
-    except KeyError:
-        raise ConfigError(
-            f"fusion.backend = {name!r}: unknown; choose one of {sorted(BACKENDS)}"
-        ) from None
-    module = importlib.import_module(module_name)
-    cls = getattr(module, cls_name)
-    if cfg_name is None:
-        if options:
-            raise ConfigError(f"fusion back end {name!r} takes no options, got {sorted(options)}")
-        return cls()
-    from roadpreview.configtools import from_mapping
-
-    config_module = importlib.import_module("roadpreview.fusion.config")
-    config = from_mapping(getattr(config_module, cfg_name), options, where="fusion")
-    return cls(config)
+    fusion: PitchFusion = build(
+        BACKENDS,
+        name,
+        key="fusion.backend",
+        where="fusion",
+        options=options,
+        config_module="roadpreview.fusion.config",
+    )
+    return fusion
 
 
 __all__ = [

@@ -63,6 +63,48 @@ class CanStageConfig:
 
 
 @dataclass(frozen=True)
+class DaemonConfig:
+    """``[daemon]``: the in-vehicle daemon (``roadpreview run``): camera and watchdogs."""
+
+    camera_source: str = param(
+        "0",
+        help="cv2.VideoCapture source: a device index (digits), a video file (played at its"
+        " recorded pace, for bench tests) or a stream URL",
+    )
+    camera_timeout_s: float = param(
+        0.5,
+        unit="s",
+        gt=0.0,
+        le=10.0,
+        help="no camera frame for this long = camera lost (watchdog): about 15 frames at"
+        " 30 fps, twice the fusion's vision timeout, so a single late frame is no failure;"
+        " the pipeline then gets frames without image (vision failure) every status period",
+    )
+    camera_reopen_s: float = param(
+        1.0,
+        unit="s",
+        gt=0.0,
+        help="a device or stream that fails is reopened after this pause (a USB camera"
+        " re-enumerates in about a second)",
+    )
+    can_queue_size: int = param(
+        10_000,
+        ge=1,
+        help="received CAN frames waiting for the processing loop: 10 s of a busy bus;"
+        " beyond it frames are dropped and counted",
+    )
+    can_latency_s: float = param(
+        0.02,
+        unit="s",
+        ge=0.0,
+        le=0.5,
+        help="a frame is processed this long after its time stamp so CAN frames stamped"
+        " before it (still in the driver or the notifier thread) are pushed first, as in a"
+        " replay; small against the 1-2 s preview of an alert",
+    )
+
+
+@dataclass(frozen=True)
 class LeadKinematicsConfig:
     """How the lead's acceleration is estimated (for the braking suppression)."""
 
@@ -86,6 +128,7 @@ class PipelineConfig:
     anomaly: AnomalyConfig = field(default_factory=AnomalyConfig)
     can: CanStageConfig = field(default_factory=CanStageConfig)
     lead: LeadKinematicsConfig = field(default_factory=LeadKinematicsConfig)
+    daemon: DaemonConfig = field(default_factory=DaemonConfig)
 
     def validate(self, where: str = "") -> None:
         if not where:

@@ -10,12 +10,11 @@ Estimators are chosen by name from `ESTIMATORS` (imported lazily)::
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
 from roadpreview.camera import CameraModel
-from roadpreview.errors import ConfigError
 from roadpreview.pitch.base import PitchEstimate, PitchEstimator
+from roadpreview.registry import build
 
 #: config name -> (module, class, config class)
 ESTIMATORS: dict[str, tuple[str, str, str | None]] = {
@@ -31,22 +30,10 @@ ESTIMATORS: dict[str, tuple[str, str, str | None]] = {
 
 def make_estimator(name: str, camera: CameraModel, **options: Any) -> PitchEstimator:
     """Build the estimator registered as ``name``; ``options`` fill its config dataclass."""
-    try:
-        module_name, cls_name, cfg_name = ESTIMATORS[name]
-    except KeyError:
-        raise ConfigError(
-            f"pitch.estimator = {name!r}: unknown; choose one of {sorted(ESTIMATORS)}"
-        ) from None
-    module = importlib.import_module(module_name)
-    cls = getattr(module, cls_name)
-    if cfg_name is None:
-        if options:
-            raise ConfigError(f"pitch estimator {name!r} takes no options, got {sorted(options)}")
-        return cls(camera)
-    from roadpreview.configtools import from_mapping
-
-    config = from_mapping(getattr(module, cfg_name), options, where="pitch")
-    return cls(camera, config)
+    estimator: PitchEstimator = build(
+        ESTIMATORS, name, camera, key="pitch.estimator", where="pitch", options=options
+    )
+    return estimator
 
 
 __all__ = ["ESTIMATORS", "PitchEstimate", "PitchEstimator", "make_estimator"]

@@ -86,8 +86,15 @@ def _encode_stream(
         clipped = np.clip(np.where(bad, 0.0, v), lo, hi)
         n_clip = int(np.count_nonzero((v < lo) | (v > hi)))
         if n_clip:
-            log.info("%s.%s: %d value(s) clipped to [%g, %g] %s", message.name, name, n_clip,
-                     lo, hi, sig.unit or "")
+            log.info(
+                "%s.%s: %d value(s) clipped to [%g, %g] %s",
+                message.name,
+                name,
+                n_clip,
+                lo,
+                hi,
+                sig.unit or "",
+            )
         cols[name] = clipped
         invalid[name] = bad
     out: list[can.Message] = []
@@ -133,15 +140,21 @@ def imu_to_messages(
     rates = _encode_stream(
         db.get_message_by_name(IMU_RATES),
         times,
-        {"RollRate": rates_deg_s[:, 0], "PitchRate": rates_deg_s[:, 1],
-         "YawRate": rates_deg_s[:, 2]},
+        {
+            "RollRate": rates_deg_s[:, 0],
+            "PitchRate": rates_deg_s[:, 1],
+            "YawRate": rates_deg_s[:, 2],
+        },
         channel,
     )
     accel = _encode_stream(
         db.get_message_by_name(IMU_ACCEL),
         times,
-        {"AccelX": meas.accel_m_s2[:, 0], "AccelY": meas.accel_m_s2[:, 1],
-         "AccelZ": meas.accel_m_s2[:, 2]},
+        {
+            "AccelX": meas.accel_m_s2[:, 0],
+            "AccelY": meas.accel_m_s2[:, 1],
+            "AccelZ": meas.accel_m_s2[:, 2],
+        },
         channel,
     )
     return [m for pair in zip(rates, accel, strict=True) for m in pair]
@@ -161,15 +174,21 @@ def speed_to_messages(
     speed = _encode_stream(
         db.get_message_by_name(VEHICLE_SPEED),
         times,
-        {"VehicleSpeed": samples.speed_m_s / KMH,
-         "MovingDirection": samples.direction.astype(np.float64)},
+        {
+            "VehicleSpeed": samples.speed_m_s / KMH,
+            "MovingDirection": samples.direction.astype(np.float64),
+        },
         channel,
     )
     wheels = _encode_stream(
         db.get_message_by_name(WHEEL_SPEEDS),
         times,
-        {"WheelSpeedFL": wheels_kmh[:, 0], "WheelSpeedFR": wheels_kmh[:, 1],
-         "WheelSpeedRL": wheels_kmh[:, 2], "WheelSpeedRR": wheels_kmh[:, 3]},
+        {
+            "WheelSpeedFL": wheels_kmh[:, 0],
+            "WheelSpeedFR": wheels_kmh[:, 1],
+            "WheelSpeedRL": wheels_kmh[:, 2],
+            "WheelSpeedRR": wheels_kmh[:, 3],
+        },
         channel,
     )
     return [m for pair in zip(speed, wheels, strict=True) for m in pair]

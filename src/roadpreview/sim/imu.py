@@ -62,41 +62,61 @@ class ImuConfig:
     ``*_bias_std``) plus a random walk. Defaults are the `automotive` preset.
     """
 
-    rate_hz: float = param(100.0, unit="Hz", ge=100.0, le=200.0,
-                           help="output data rate; CAN IMUs send every 10 ms")
-    sampling: str = param("average", choices=("average", "sample"),
-                          help="'average': mean over the sample interval (the sensor's"
-                               " anti-alias filter); 'sample': the instantaneous value")
-    gyro_noise_density: float = param(0.005 * DEG, unit="rad/s/√Hz", ge=0.0,
-                                      help="rate noise density (0.005 °/s/√Hz)")
-    gyro_bias: tuple[float, float, float] = param((0.0, 0.0, 0.0), unit="rad/s",
-                                                  help="fixed part of the initial bias, x/y/z")
-    gyro_bias_std: float = param(0.05 * DEG, unit="rad/s", ge=0.0,
-                                 help="per-axis std of the random initial bias (0.05 °/s)")
-    gyro_bias_random_walk: float = param(1e-4 * DEG, unit="rad/s/√s", ge=0.0,
-                                         help="bias random walk; ~3 °/h drift over a minute")
-    gyro_range: float = param(125.0 * DEG, unit="rad/s", gt=0.0,
-                              help="full scale ±125 °/s; the output saturates there")
-    gyro_lsb: float = param(DEG / 262.4, unit="rad/s", ge=0.0,
-                            help="resolution, 16 bit over ±125 °/s (0 = none)")
-    accel_noise_density: float = param(150e-6 * STANDARD_GRAVITY_M_S2, unit="m/s²/√Hz",
-                                       ge=0.0, help="150 µg/√Hz")
-    accel_bias: tuple[float, float, float] = param((0.0, 0.0, 0.0), unit="m/s²",
-                                                   help="fixed part of the initial bias, x/y/z")
-    accel_bias_std: float = param(0.05, unit="m/s²", ge=0.0,
-                                  help="per-axis std of the random initial bias (~5 mg)")
-    accel_bias_random_walk: float = param(2e-4, unit="m/s²/√s", ge=0.0,
-                                          help="bias random walk")
-    accel_range: float = param(3.0 * STANDARD_GRAVITY_M_S2, unit="m/s²", gt=0.0,
-                               help="full scale ±3 g")
-    accel_lsb: float = param(STANDARD_GRAVITY_M_S2 / 10920.0, unit="m/s²", ge=0.0,
-                             help="resolution, 16 bit over ±3 g (0 = none)")
-    time_offset_s: float = param(0.0, unit="s", ge=-0.08, le=0.08,
-                                 help="stamp minus true sample time; > 0: the stamps lag")
-    timestamp_jitter_s: float = param(0.0, unit="s", ge=0.0,
-                                      help="std of the random error of each stamp")
-    gravity_m_s2: float = param(STANDARD_GRAVITY_M_S2, unit="m/s²", ge=9.7, le=9.9,
-                                help="local gravity (standard gravity)")
+    rate_hz: float = param(
+        100.0, unit="Hz", ge=100.0, le=200.0, help="output data rate; CAN IMUs send every 10 ms"
+    )
+    sampling: str = param(
+        "average",
+        choices=("average", "sample"),
+        help="'average': mean over the sample interval (the sensor's"
+        " anti-alias filter); 'sample': the instantaneous value",
+    )
+    gyro_noise_density: float = param(
+        0.005 * DEG, unit="rad/s/√Hz", ge=0.0, help="rate noise density (0.005 °/s/√Hz)"
+    )
+    gyro_bias: tuple[float, float, float] = param(
+        (0.0, 0.0, 0.0), unit="rad/s", help="fixed part of the initial bias, x/y/z"
+    )
+    gyro_bias_std: float = param(
+        0.05 * DEG, unit="rad/s", ge=0.0, help="per-axis std of the random initial bias (0.05 °/s)"
+    )
+    gyro_bias_random_walk: float = param(
+        1e-4 * DEG, unit="rad/s/√s", ge=0.0, help="bias random walk; ~3 °/h drift over a minute"
+    )
+    gyro_range: float = param(
+        125.0 * DEG, unit="rad/s", gt=0.0, help="full scale ±125 °/s; the output saturates there"
+    )
+    gyro_lsb: float = param(
+        DEG / 262.4, unit="rad/s", ge=0.0, help="resolution, 16 bit over ±125 °/s (0 = none)"
+    )
+    accel_noise_density: float = param(
+        150e-6 * STANDARD_GRAVITY_M_S2, unit="m/s²/√Hz", ge=0.0, help="150 µg/√Hz"
+    )
+    accel_bias: tuple[float, float, float] = param(
+        (0.0, 0.0, 0.0), unit="m/s²", help="fixed part of the initial bias, x/y/z"
+    )
+    accel_bias_std: float = param(
+        0.05, unit="m/s²", ge=0.0, help="per-axis std of the random initial bias (~5 mg)"
+    )
+    accel_bias_random_walk: float = param(2e-4, unit="m/s²/√s", ge=0.0, help="bias random walk")
+    accel_range: float = param(
+        3.0 * STANDARD_GRAVITY_M_S2, unit="m/s²", gt=0.0, help="full scale ±3 g"
+    )
+    accel_lsb: float = param(
+        STANDARD_GRAVITY_M_S2 / 10920.0,
+        unit="m/s²",
+        ge=0.0,
+        help="resolution, 16 bit over ±3 g (0 = none)",
+    )
+    time_offset_s: float = param(
+        0.0, unit="s", ge=-0.08, le=0.08, help="stamp minus true sample time; > 0: the stamps lag"
+    )
+    timestamp_jitter_s: float = param(
+        0.0, unit="s", ge=0.0, help="std of the random error of each stamp"
+    )
+    gravity_m_s2: float = param(
+        STANDARD_GRAVITY_M_S2, unit="m/s²", ge=9.7, le=9.9, help="local gravity (standard gravity)"
+    )
 
     def validate(self, where: str = "ImuConfig") -> None:
         """Check the ranges and the relations between fields; raise `ConfigError`."""
@@ -210,21 +230,30 @@ class SpeedSensorConfig:
     Standstill (wheel-speed sensors cannot time edges that far apart).
     """
 
-    rate_hz: float = param(50.0, unit="Hz", ge=10.0, le=100.0,
-                           help="speed messages every 20 ms, as common")
-    time_offset_s: float = param(0.010, unit="s", ge=0.0, le=0.2,
-                                 help="ESC processing and filtering latency (assumption)")
-    timestamp_jitter_s: float = param(1e-4, unit="s", ge=0.0, le=2e-3,
-                                      help="std of the random error of each stamp")
-    speed_lsb_kmh: float = param(0.01, unit="km/h", ge=0.0,
-                                 help="resolution of VEHICLE_SPEED.VehicleSpeed")
-    wheel_speed_lsb_kmh: float = param(0.03125, unit="km/h", ge=0.0,
-                                       help="resolution of the WHEEL_SPEEDS signals")
-    wheel_speed_noise_kmh: float = param(0.05, unit="km/h", ge=0.0,
-                                         help="std of wheel-speed noise (tone-wheel"
-                                              " pitch errors, tyre vibration)")
-    standstill_below_kmh: float = param(0.5, unit="km/h", ge=0.0, le=5.0,
-                                        help="slowest speed the wheel-speed sensors resolve")
+    rate_hz: float = param(
+        50.0, unit="Hz", ge=10.0, le=100.0, help="speed messages every 20 ms, as common"
+    )
+    time_offset_s: float = param(
+        0.010, unit="s", ge=0.0, le=0.2, help="ESC processing and filtering latency (assumption)"
+    )
+    timestamp_jitter_s: float = param(
+        1e-4, unit="s", ge=0.0, le=2e-3, help="std of the random error of each stamp"
+    )
+    speed_lsb_kmh: float = param(
+        0.01, unit="km/h", ge=0.0, help="resolution of VEHICLE_SPEED.VehicleSpeed"
+    )
+    wheel_speed_lsb_kmh: float = param(
+        0.03125, unit="km/h", ge=0.0, help="resolution of the WHEEL_SPEEDS signals"
+    )
+    wheel_speed_noise_kmh: float = param(
+        0.05,
+        unit="km/h",
+        ge=0.0,
+        help="std of wheel-speed noise (tone-wheel pitch errors, tyre vibration)",
+    )
+    standstill_below_kmh: float = param(
+        0.5, unit="km/h", ge=0.0, le=5.0, help="slowest speed the wheel-speed sensors resolve"
+    )
 
     def validate(self, where: str = "SpeedSensorConfig") -> None:
         """Check the ranges; raise `ConfigError`."""
@@ -360,9 +389,7 @@ def _saturate_quantise(x: Array, full_scale: float, lsb: float) -> Array:
     return y
 
 
-def _bias_path(
-    initial: Array, random_walk: float, period: float, z: Array
-) -> Array:
+def _bias_path(initial: Array, random_walk: float, period: float, z: Array) -> Array:
     """Bias per sample: ``initial`` (3,) plus a random walk from standard normals ``z`` (n, 3)."""
     steps = random_walk * math.sqrt(period) * z
     steps[0] = 0.0
@@ -478,14 +505,16 @@ def simulate_imu(
     gyro_bias0 = np.asarray(cfg.gyro_bias, dtype=np.float64) + cfg.gyro_bias_std * (
         rng.standard_normal(3)
     )
-    gyro_bias = _bias_path(gyro_bias0, cfg.gyro_bias_random_walk, period,
-                           rng.standard_normal((m, 3)))
+    gyro_bias = _bias_path(
+        gyro_bias0, cfg.gyro_bias_random_walk, period, rng.standard_normal((m, 3))
+    )
     gyro_noise = cfg.gyro_noise_std * rng.standard_normal((m, 3))
     accel_bias0 = np.asarray(cfg.accel_bias, dtype=np.float64) + cfg.accel_bias_std * (
         rng.standard_normal(3)
     )
-    accel_bias = _bias_path(accel_bias0, cfg.accel_bias_random_walk, period,
-                            rng.standard_normal((m, 3)))
+    accel_bias = _bias_path(
+        accel_bias0, cfg.accel_bias_random_walk, period, rng.standard_normal((m, 3))
+    )
     accel_noise = cfg.accel_noise_std * rng.standard_normal((m, 3))
     jitter = cfg.timestamp_jitter_s * rng.standard_normal(m)
 
@@ -545,9 +574,7 @@ def simulate_speed(
 
     threshold = cfg.standstill_below_kmh * KMH
     moving = np.abs(v_mean) >= threshold
-    direction = np.where(moving, np.where(v_mean > 0, FORWARD, REVERSE), STANDSTILL).astype(
-        np.int8
-    )
+    direction = np.where(moving, np.where(v_mean > 0, FORWARD, REVERSE), STANDSTILL).astype(np.int8)
     speed = np.where(moving, _quantise(np.abs(v_mean) / KMH, cfg.speed_lsb_kmh) * KMH, 0.0)
     w_abs = np.abs(np.abs(w_mean) + wheel_noise)
     w_abs = np.where(np.abs(w_mean) >= threshold, w_abs, 0.0)

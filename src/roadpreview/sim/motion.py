@@ -45,8 +45,9 @@ class GapKnot:
     """The planned lead gap at one time; between knots it changes along a quintic smoothstep."""
 
     t_s: float = param(0.0, unit="s", ge=0, help="time of the knot")
-    gap_m: float = param(15.0, unit="m", ge=MIN_GAP_M, le=500,
-                         help="lead rear to ego front (bumper to bumper)")
+    gap_m: float = param(
+        15.0, unit="m", ge=MIN_GAP_M, le=500, help="lead rear to ego front (bumper to bumper)"
+    )
 
 
 @dataclass(frozen=True)
@@ -58,17 +59,21 @@ class LeadEvent:
     """
 
     t_s: float = param(5.0, unit="s", ge=0, help="start of the manoeuvre")
-    accel_mps2: float = param(-3.0, unit="m/s^2", ge=-10, le=5,
-                              help="signed: negative brakes (the body dives)")
+    accel_mps2: float = param(
+        -3.0, unit="m/s^2", ge=-10, le=5, help="signed: negative brakes (the body dives)"
+    )
     duration_s: float = param(1.5, unit="s", gt=0, le=60, help="ramps included")
-    ramp_s: float = param(0.3, unit="s", ge=0, le=5,
-                          help="brake build-up / release time (jerk limit)")
+    ramp_s: float = param(
+        0.3, unit="s", ge=0, le=5, help="brake build-up / release time (jerk limit)"
+    )
 
     def validate(self, where: str) -> None:
         if 2 * self.ramp_s > self.duration_s:
             prefix = f"{where}." if where else ""
-            raise ConfigError(f"{prefix}ramp_s = {self.ramp_s} s: two ramps exceed duration_s ="
-                              f" {self.duration_s} s")
+            raise ConfigError(
+                f"{prefix}ramp_s = {self.ramp_s} s: two ramps exceed duration_s ="
+                f" {self.duration_s} s"
+            )
 
     def accel(self, t: ArrayLike) -> FloatArray:
         """The event's acceleration (m/s^2) at times ``t``."""
@@ -85,14 +90,18 @@ class LeadEvent:
 class TrafficVehicle:
     """Another vehicle, at constant speed along a lane line; kinematics only."""
 
-    direction: str = param("oncoming", choices=("oncoming", "same"),
-                           help="oncoming drives towards -X; same drives towards +X")
+    direction: str = param(
+        "oncoming",
+        choices=("oncoming", "same"),
+        help="oncoming drives towards -X; same drives towards +X",
+    )
     start_x_m: float = param(200.0, unit="m", help="X of its CG at t = 0")
     lateral_m: float = param(3.5, unit="m", help="Y of its line (3.5: the oncoming lane centre)")
     speed_kmh: float = param(50.0, unit="km/h", ge=0, le=200, help="its speed (positive)")
     # param() returns dataclasses.field(default_factory=...), which RUF009 cannot see
     shape: VehicleShape = param(  # noqa: RUF009
-        default_factory=VehicleShape, help="its body box")
+        default_factory=VehicleShape, help="its body box"
+    )
     appearance: int = param(0, ge=0, help="appearance seed for the renderer")
 
 
@@ -105,34 +114,52 @@ class MotionConfig:
     ego: VehicleParams = param(default_factory=VehicleParams, help="ego vehicle")  # noqa: RUF009
     lead: VehicleParams = param(default_factory=VehicleParams, help="lead vehicle")  # noqa: RUF009
     duration_s: float = param(20.0, unit="s", gt=0, le=3600, help="length of the drive")
-    dt_s: float = param(0.001, unit="s", ge=1e-4, le=0.01,
-                        help="simulation step; 1 ms resolves the ~14 Hz wheel hop")
-    ego_speed_kmh: float = param(30.0, unit="km/h", gt=0, le=200,
-                                 help="constant ego speed when ego_speed_knots is empty")
+    dt_s: float = param(
+        0.001,
+        unit="s",
+        ge=1e-4,
+        le=0.01,
+        help="simulation step; 1 ms resolves the ~14 Hz wheel hop",
+    )
+    ego_speed_kmh: float = param(
+        30.0, unit="km/h", gt=0, le=200, help="constant ego speed when ego_speed_knots is empty"
+    )
     ego_speed_knots: list[SpeedKnot] = param(  # noqa: RUF009
-        default_factory=list, help="piecewise-linear ego speed plan; replaces ego_speed_kmh")
+        default_factory=list, help="piecewise-linear ego speed plan; replaces ego_speed_kmh"
+    )
     ego_start_x_m: float = param(30.0, unit="m", ge=0, help="X of the ego CG at t = 0")
-    gap_m: float = param(15.0, unit="m", ge=MIN_GAP_M, le=500,
-                         help="constant lead gap (bumper to bumper) when gap_knots is empty")
+    gap_m: float = param(
+        15.0,
+        unit="m",
+        ge=MIN_GAP_M,
+        le=500,
+        help="constant lead gap (bumper to bumper) when gap_knots is empty",
+    )
     gap_knots: list[GapKnot] = param(  # noqa: RUF009
-        default_factory=list, help="smoothly varying gap plan; replaces gap_m")
-    ego_lateral_m: float = param(0.0, unit="m", ge=-10, le=10,
-                                 help="Y of the ego's line (0 = lane centre, left +)")
+        default_factory=list, help="smoothly varying gap plan; replaces gap_m"
+    )
+    ego_lateral_m: float = param(
+        0.0, unit="m", ge=-10, le=10, help="Y of the ego's line (0 = lane centre, left +)"
+    )
     lead_lateral_m: float = param(0.0, unit="m", ge=-10, le=10, help="Y of the lead's line")
     lead_events: list[LeadEvent] = param(  # noqa: RUF009
-        default_factory=list, help="lead braking / acceleration manoeuvres")
+        default_factory=list, help="lead braking / acceleration manoeuvres"
+    )
     ego_follows_lead_events: bool = param(True, help="the ego repeats each lead manoeuvre")
     reaction_s: float = param(1.0, unit="s", ge=0, le=5, help="delay of the ego's repetition")
     traffic: list[TrafficVehicle] = param(  # noqa: RUF009
-        default_factory=list, help="explicit other vehicles")
-    oncoming_per_minute: float = param(2.0, unit="1/min", ge=0, le=60,
-                                       help="mean rate of random oncoming vehicles")
-    camera_forward_m: float = param(1.0, unit="m", ge=-5, le=5,
-                                    help="camera ahead of the ego CG (windscreen)")
-    camera_height_m: float = param(1.3, unit="m", gt=0, le=4,
-                                   help="camera above the road at rest")
-    hard_window_s: float = param(0.5, unit="s", ge=0, le=5,
-                                 help="ego hits another anomaly this close to the lead's: hard")
+        default_factory=list, help="explicit other vehicles"
+    )
+    oncoming_per_minute: float = param(
+        2.0, unit="1/min", ge=0, le=60, help="mean rate of random oncoming vehicles"
+    )
+    camera_forward_m: float = param(
+        1.0, unit="m", ge=-5, le=5, help="camera ahead of the ego CG (windscreen)"
+    )
+    camera_height_m: float = param(1.3, unit="m", gt=0, le=4, help="camera above the road at rest")
+    hard_window_s: float = param(
+        0.5, unit="s", ge=0, le=5, help="ego hits another anomaly this close to the lead's: hard"
+    )
 
     def validate(self, where: str) -> None:
         """Cross-field checks: knots, events and traffic in range, a feasible drive."""
@@ -148,8 +175,9 @@ class MotionConfig:
             times = [k.t_s for k in getattr(self, name)]
             for i in range(1, len(times)):
                 if times[i] <= times[i - 1]:
-                    raise ConfigError(f"{prefix}{name}[{i}].t_s = {times[i]} s: knot times must"
-                                      " increase")
+                    raise ConfigError(
+                        f"{prefix}{name}[{i}].t_s = {times[i]} s: knot times must increase"
+                    )
         _kinematics(self, where)
 
 
@@ -234,28 +262,46 @@ def _kinematics(cfg: MotionConfig, where: str = "") -> _Kinematics:
         raise ConfigError(f"{prefix}{speed_field}: the planned ego speed goes negative")
     if v_ego.min() < tol:
         i = int(np.argmin(v_ego))
-        raise ConfigError(f"{prefix}lead_events: the ego, repeating them, would reverse"
-                          f" (speed {v_ego[i]:.2f} m/s at t = {t[i]:.2f} s)")
+        raise ConfigError(
+            f"{prefix}lead_events: the ego, repeating them, would reverse"
+            f" (speed {v_ego[i]:.2f} m/s at t = {t[i]:.2f} s)"
+        )
     if (v_plan + gap_d).min() < tol:
-        raise ConfigError(f"{prefix}{gap_field}: the gap shrinks faster than the ego drives;"
-                          " the lead would reverse")
+        raise ConfigError(
+            f"{prefix}{gap_field}: the gap shrinks faster than the ego drives;"
+            " the lead would reverse"
+        )
     if v_lead.min() < tol:
         i = int(np.argmin(v_lead))
-        raise ConfigError(f"{prefix}lead_events: the lead would reverse (speed {v_lead[i]:.2f}"
-                          f" m/s at t = {t[i]:.2f} s)")
+        raise ConfigError(
+            f"{prefix}lead_events: the lead would reverse (speed {v_lead[i]:.2f}"
+            f" m/s at t = {t[i]:.2f} s)"
+        )
     x_ego = cfg.ego_start_x_m + _cumtrapz(v_ego, dt)
     gap = gap_plan + _cumtrapz(dv_lead, dt) - _cumtrapz(dv_ego, dt)
     if gap.min() < MIN_GAP_M - 1e-9:
         i = int(np.argmin(gap))
-        raise ConfigError(f"{prefix}lead_events: the gap falls to {gap[i]:.2f} m at t ="
-                          f" {t[i]:.2f} s (must stay >= {MIN_GAP_M} m)")
-    x_lead = (x_ego + cfg.ego.shape.cg_to_front_m + gap + cfg.lead.shape.cg_to_rear_m)
+        raise ConfigError(
+            f"{prefix}lead_events: the gap falls to {gap[i]:.2f} m at t ="
+            f" {t[i]:.2f} s (must stay >= {MIN_GAP_M} m)"
+        )
+    x_lead = x_ego + cfg.ego.shape.cg_to_front_m + gap + cfg.lead.shape.cg_to_rear_m
     lead_front = float(x_lead[-1]) + cfg.lead.cg_to_front_axle_m + cfg.lead.wheel_radius_m
     if lead_front > cfg.road.length_m:
-        raise ConfigError(f"{prefix}road.length_m = {cfg.road.length_m} m: too short, the lead's"
-                          f" front wheels reach X = {lead_front:.1f} m")
-    return _Kinematics(t=t, x_ego=x_ego, v_ego=v_ego, a_ego=a_plan + a_ego_ev, x_lead=x_lead,
-                       v_lead=v_lead, a_lead=a_plan + gap_dd + a_lead_ev, gap=gap)
+        raise ConfigError(
+            f"{prefix}road.length_m = {cfg.road.length_m} m: too short, the lead's"
+            f" front wheels reach X = {lead_front:.1f} m"
+        )
+    return _Kinematics(
+        t=t,
+        x_ego=x_ego,
+        v_ego=v_ego,
+        a_ego=a_plan + a_ego_ev,
+        x_lead=x_lead,
+        v_lead=v_lead,
+        a_lead=a_plan + gap_dd + a_lead_ev,
+        gap=gap,
+    )
 
 
 # -- other traffic ----------------------------------------------------------------------
@@ -291,16 +337,27 @@ class TrafficTrajectory:
         h = self.road.height(x[:, None] + fwd[None, :], self.lateral_m + left[None, :])
         pitch = np.arctan((h[:, :2].mean(1) - h[:, 2:].mean(1)) / (2 * half_wb))
         roll = np.arctan((h[:, [0, 2]].mean(1) - h[:, [1, 3]].mean(1)) / (2 * half_tr))
-        return {"x": x, "y": np.full(t.size, self.lateral_m),
-                "z": h.mean(1) + self.shape.cg_height_m, "pitch": pitch, "roll": roll,
-                "yaw": np.full(t.size, self.yaw_rad)}
+        return {
+            "x": x,
+            "y": np.full(t.size, self.lateral_m),
+            "z": h.mean(1) + self.shape.cg_height_m,
+            "pitch": pitch,
+            "roll": roll,
+            "yaw": np.full(t.size, self.yaw_rad),
+        }
 
     def pose_at(self, t: float) -> VehiclePose:
         s = self.states([t])
         return VehiclePose(
-            vehicle_id=self.vehicle_id, x_m=float(s["x"][0]), y_m=float(s["y"][0]),
-            z_m=float(s["z"][0]), pitch_rad=float(s["pitch"][0]), roll_rad=float(s["roll"][0]),
-            yaw_rad=float(s["yaw"][0]), shape=self.shape, appearance=self.appearance,
+            vehicle_id=self.vehicle_id,
+            x_m=float(s["x"][0]),
+            y_m=float(s["y"][0]),
+            z_m=float(s["z"][0]),
+            pitch_rad=float(s["pitch"][0]),
+            roll_rad=float(s["roll"][0]),
+            yaw_rad=float(s["yaw"][0]),
+            shape=self.shape,
+            appearance=self.appearance,
         )
 
 
@@ -313,15 +370,23 @@ _TRAFFIC_SHAPES = (
 )
 
 
-def _traffic(cfg: MotionConfig, road: Road, kin: _Kinematics,
-             rng: np.random.Generator) -> tuple[TrafficTrajectory, ...]:
+def _traffic(
+    cfg: MotionConfig, road: Road, kin: _Kinematics, rng: np.random.Generator
+) -> tuple[TrafficTrajectory, ...]:
     out: list[TrafficTrajectory] = []
     for tv in cfg.traffic:
         sign = -1.0 if tv.direction == "oncoming" else 1.0
-        out.append(TrafficTrajectory(
-            vehicle_id=2 + len(out), shape=tv.shape, appearance=tv.appearance,
-            start_x_m=tv.start_x_m, velocity_mps=sign * tv.speed_kmh * KMH,
-            lateral_m=tv.lateral_m, road=road))
+        out.append(
+            TrafficTrajectory(
+                vehicle_id=2 + len(out),
+                shape=tv.shape,
+                appearance=tv.appearance,
+                start_x_m=tv.start_x_m,
+                velocity_mps=sign * tv.speed_kmh * KMH,
+                lateral_m=tv.lateral_m,
+                road=road,
+            )
+        )
     count = int(rng.poisson(cfg.oncoming_per_minute * (cfg.duration_s + 10.0) / 60.0))
     shapes = [s for s, _ in _TRAFFIC_SHAPES]
     weights = np.array([w for _, w in _TRAFFIC_SHAPES])
@@ -329,12 +394,22 @@ def _traffic(cfg: MotionConfig, road: Road, kin: _Kinematics,
         t_pass = rng.uniform(0.0, cfg.duration_s + 10.0)  # when it passes the ego
         speed = rng.uniform(40.0, 70.0) * KMH
         shape = shapes[int(rng.choice(len(shapes), p=weights / weights.sum()))]
-        x_pass = float(np.interp(t_pass, kin.t, kin.x_ego,
-                                 right=kin.x_ego[-1] + kin.v_ego[-1] * (t_pass - kin.t[-1])))
-        out.append(TrafficTrajectory(
-            vehicle_id=2 + len(out), shape=shape, appearance=int(rng.integers(0, 2**31 - 1)),
-            start_x_m=x_pass + speed * t_pass, velocity_mps=-speed,
-            lateral_m=road.lane_width_m + rng.uniform(-0.3, 0.3), road=road))
+        x_pass = float(
+            np.interp(
+                t_pass, kin.t, kin.x_ego, right=kin.x_ego[-1] + kin.v_ego[-1] * (t_pass - kin.t[-1])
+            )
+        )
+        out.append(
+            TrafficTrajectory(
+                vehicle_id=2 + len(out),
+                shape=shape,
+                appearance=int(rng.integers(0, 2**31 - 1)),
+                start_x_m=x_pass + speed * t_pass,
+                velocity_mps=-speed,
+                lateral_m=road.lane_width_m + rng.uniform(-0.3, 0.3),
+                road=road,
+            )
+        )
     return tuple(out)
 
 
@@ -356,12 +431,19 @@ class CameraTrack:
 
     def pose(self, i: int) -> CameraPose:
         x, y, z = (float(v) for v in self.position[i])
-        return CameraPose(x_m=x, y_m=y, z_m=z, pitch_rad=float(self.pitch[i]),
-                          roll_rad=float(self.roll[i]), yaw_rad=float(self.yaw[i]))
+        return CameraPose(
+            x_m=x,
+            y_m=y,
+            z_m=z,
+            pitch_rad=float(self.pitch[i]),
+            roll_rad=float(self.roll[i]),
+            yaw_rad=float(self.yaw[i]),
+        )
 
 
-def camera_track(ego: BodyMotion, mount_forward_m: float, mount_height_m: float,
-                 times: ArrayLike) -> CameraTrack:
+def camera_track(
+    ego: BodyMotion, mount_forward_m: float, mount_height_m: float, times: ArrayLike
+) -> CameraTrack:
     """Poses at ``times`` of a camera fixed to the ego body ``mount_forward_m`` ahead of the
     CG and ``mount_height_m`` above the road at rest; its axes are the body's (pitch, roll and
     yaw equal the ego's; a fixed mounting pitch belongs to the calibrated forward direction)."""
@@ -372,14 +454,20 @@ def camera_track(ego: BodyMotion, mount_forward_m: float, mount_height_m: float,
     return CameraTrack(t=t, position=pos, pitch=s.pitch, roll=s.roll, yaw=s.yaw)
 
 
-def camera_pose_at(ego: BodyMotion, mount_forward_m: float, mount_height_m: float,
-                   t: float) -> CameraPose:
+def camera_pose_at(
+    ego: BodyMotion, mount_forward_m: float, mount_height_m: float, t: float
+) -> CameraPose:
     """The camera pose at time ``t`` (see `camera_track`)."""
     return camera_track(ego, mount_forward_m, mount_height_m, [t]).pose(0)
 
 
-def lead_distance(ego: BodyMotion, lead: BodyMotion, mount_forward_m: float,
-                  mount_height_m: float, times: ArrayLike) -> FloatArray:
+def lead_distance(
+    ego: BodyMotion,
+    lead: BodyMotion,
+    mount_forward_m: float,
+    mount_height_m: float,
+    times: ArrayLike,
+) -> FloatArray:
     """Distance along X from the camera to the lead's rear face at ``times``."""
     t = np.atleast_1d(np.asarray(times, dtype=float))
     cam = camera_track(ego, mount_forward_m, mount_height_m, t)
@@ -426,8 +514,9 @@ def _crossing_time(t: FloatArray, axle_x: FloatArray, target: float) -> float:
     return float(t[i - 1] + frac * (t[i] - t[i - 1]))
 
 
-def _events(cfg: MotionConfig, road: Road, ego: BodyMotion,
-            lead: BodyMotion) -> tuple[AnomalyEvent, ...]:
+def _events(
+    cfg: MotionConfig, road: Road, ego: BodyMotion, lead: BodyMotion
+) -> tuple[AnomalyEvent, ...]:
     rows = []
     for i, a in enumerate(road.anomalies):
         apex = a.apex_x_m
@@ -445,8 +534,11 @@ def _events(cfg: MotionConfig, road: Road, ego: BodyMotion,
         ego_hits = ego_side != "none" and ego_crosses
         dist = math.nan
         if not math.isnan(times["lf"]):
-            dist = float(lead_distance(ego, lead, cfg.camera_forward_m, cfg.camera_height_m,
-                                       [times["lf"]])[0])
+            dist = float(
+                lead_distance(ego, lead, cfg.camera_forward_m, cfg.camera_height_m, [times["lf"]])[
+                    0
+                ]
+            )
         rows.append((i, a, lead_side, ego_side, times, lead_hits, ego_hits, dist))
     out = []
     for i, a, lead_side, ego_side, times, lead_hits, ego_hits, dist in rows:
@@ -455,16 +547,33 @@ def _events(cfg: MotionConfig, road: Road, ego: BodyMotion,
             for j, _, _, _, other, _, other_ego_hits, _ in rows:
                 if j == i or not other_ego_hits:
                     continue
-                near = [abs(other[k] - times["lf"]) <= cfg.hard_window_s for k in ("ef", "er")
-                        if not math.isnan(other[k])]
+                near = [
+                    abs(other[k] - times["lf"]) <= cfg.hard_window_s
+                    for k in ("ef", "er")
+                    if not math.isnan(other[k])
+                ]
                 if any(near):
                     hard = True
                     break
-        out.append(AnomalyEvent(
-            index=i, kind=a.kind, apex_x_m=a.apex_x_m, height_m=a.height_m, length_m=a.length_m,
-            lead_side=lead_side, ego_side=ego_side, lead_front_t_s=times["lf"],
-            lead_rear_t_s=times["lr"], ego_front_t_s=times["ef"], ego_rear_t_s=times["er"],
-            lead_hits=lead_hits, ego_hits=ego_hits, lead_distance_m=dist, hard=hard))
+        out.append(
+            AnomalyEvent(
+                index=i,
+                kind=a.kind,
+                apex_x_m=a.apex_x_m,
+                height_m=a.height_m,
+                length_m=a.length_m,
+                lead_side=lead_side,
+                ego_side=ego_side,
+                lead_front_t_s=times["lf"],
+                lead_rear_t_s=times["lr"],
+                ego_front_t_s=times["ef"],
+                ego_rear_t_s=times["er"],
+                lead_hits=lead_hits,
+                ego_hits=ego_hits,
+                lead_distance_m=dist,
+                hard=hard,
+            )
+        )
     return tuple(out)
 
 
@@ -489,8 +598,10 @@ class DriveMotion:
     @property
     def gap(self) -> FloatArray:
         """Bumper-to-bumper gap (lead rear to ego front) on the time grid."""
-        return np.asarray((self.lead.x - self.lead.shape.cg_to_rear_m)
-                          - (self.ego.x + self.ego.shape.cg_to_front_m))
+        return np.asarray(
+            (self.lead.x - self.lead.shape.cg_to_rear_m)
+            - (self.ego.x + self.ego.shape.cg_to_front_m)
+        )
 
     def lead_distance(self, t: ArrayLike) -> FloatArray:
         """Camera to lead rear face along X at times ``t``."""
@@ -516,14 +627,38 @@ def simulate_motion(cfg: MotionConfig, rng: np.random.Generator) -> DriveMotion:
     cfg.validate("motion")
     kin = _kinematics(cfg, "motion")
     road = generate_road(cfg.road, rng)
-    ego = simulate_vehicle(cfg.ego, road, kin.t, kin.x_ego, kin.v_ego, kin.a_ego,
-                           cfg.ego_lateral_m, vehicle_id=0, appearance=0)
-    lead = simulate_vehicle(cfg.lead, road, kin.t, kin.x_lead, kin.v_lead, kin.a_lead,
-                            cfg.lead_lateral_m, vehicle_id=1, is_lead=True,
-                            appearance=int(rng.integers(0, 2**31 - 1)))
+    ego = simulate_vehicle(
+        cfg.ego,
+        road,
+        kin.t,
+        kin.x_ego,
+        kin.v_ego,
+        kin.a_ego,
+        cfg.ego_lateral_m,
+        vehicle_id=0,
+        appearance=0,
+    )
+    lead = simulate_vehicle(
+        cfg.lead,
+        road,
+        kin.t,
+        kin.x_lead,
+        kin.v_lead,
+        kin.a_lead,
+        cfg.lead_lateral_m,
+        vehicle_id=1,
+        is_lead=True,
+        appearance=int(rng.integers(0, 2**31 - 1)),
+    )
     traffic = _traffic(cfg, road, kin, rng)
-    return DriveMotion(config=cfg, road=road, ego=ego, lead=lead, traffic=traffic,
-                       events=_events(cfg, road, ego, lead))
+    return DriveMotion(
+        config=cfg,
+        road=road,
+        ego=ego,
+        lead=lead,
+        traffic=traffic,
+        events=_events(cfg, road, ego, lead),
+    )
 
 
 __all__ = [

@@ -68,17 +68,30 @@ class Anomaly:
 
     kind: str = param("bump", choices=ANOMALY_KINDS, help="bump, cushion, pothole, step or wave")
     start_x_m: float = param(100.0, unit="m", ge=0, help="X where the anomaly begins")
-    length_m: float = param(2.0, unit="m", ge=0, le=200,
-                            help="extent along X; the transition length of a step")
-    height_m: float = param(0.06, unit="m", ge=-0.5, le=0.5,
-                            help="signed: potholes negative; peak-to-peak for a wave")
+    length_m: float = param(
+        2.0, unit="m", ge=0, le=200, help="extent along X; the transition length of a step"
+    )
+    height_m: float = param(
+        0.06, unit="m", ge=-0.5, le=0.5, help="signed: potholes negative; peak-to-peak for a wave"
+    )
     center_y_m: float = param(0.0, unit="m", help="lateral centre of the anomaly (Y, left +)")
-    width_m: float = param(3.5, unit="m", gt=0, le=50,
-                           help="lateral extent; the lane width by default (both wheel tracks)")
-    ramp_m: float = param(0.0, unit="m", ge=0, le=10,
-                          help="ramp (bevel) length of a bump, cushion or pothole")
-    ramp_deg: float = param(0.0, unit="deg", ge=0, lt=90,
-                            help="ramp angle; when > 0 it sets the ramp length |h| / tan(angle)")
+    width_m: float = param(
+        3.5,
+        unit="m",
+        gt=0,
+        le=50,
+        help="lateral extent; the lane width by default (both wheel tracks)",
+    )
+    ramp_m: float = param(
+        0.0, unit="m", ge=0, le=10, help="ramp (bevel) length of a bump, cushion or pothole"
+    )
+    ramp_deg: float = param(
+        0.0,
+        unit="deg",
+        ge=0,
+        lt=90,
+        help="ramp angle; when > 0 it sets the ramp length |h| / tan(angle)",
+    )
     wavelength_m: float = param(2.0, unit="m", gt=0, le=100, help="wavelength of a wave")
 
     def validate(self, where: str) -> None:
@@ -174,8 +187,15 @@ class Anomaly:
 
 def paper_speed_bump(start_x_m: float, *, center_y_m: float = 0.0, width_m: float = 3.5) -> Anomaly:
     """The speed bump of the paper's controlled experiment: 6 cm high, 2 m long, 7 deg ramps."""
-    return Anomaly(kind="bump", start_x_m=start_x_m, length_m=2.0, height_m=0.06,
-                   center_y_m=center_y_m, width_m=width_m, ramp_deg=7.0)
+    return Anomaly(
+        kind="bump",
+        start_x_m=start_x_m,
+        length_m=2.0,
+        height_m=0.06,
+        center_y_m=center_y_m,
+        width_m=width_m,
+        ramp_deg=7.0,
+    )
 
 
 # -- configuration ----------------------------------------------------------------------
@@ -189,33 +209,51 @@ def _default_mix() -> dict[str, float]:
 class RoadConfig:
     """How to generate a road. An explicit ``anomalies`` list replaces the random ones."""
 
-    iso_class: str = param("B", choices=("off", "A", "B", "C", "D", "E"),
-                           help="ISO 8608 roughness class; B is a good ordinary road")
+    iso_class: str = param(
+        "B",
+        choices=("off", "A", "B", "C", "D", "E"),
+        help="ISO 8608 roughness class; B is a good ordinary road",
+    )
     length_m: float = param(1000.0, unit="m", gt=0, le=100_000, help="road from X = 0 to this")
-    resolution_m: float = param(0.05, unit="m", gt=0, le=0.5,
-                                help="roughness sample spacing; Nyquist 10 cycles/m at 0.05 m")
-    min_wavenumber_cpm: float = param(0.011, unit="cycles/m", gt=0, le=1.0,
-                                      help="ISO 8608 lower band limit; longer waves are hills")
-    track_spacing_m: float = param(1.6, unit="m", gt=0, le=3.0,
-                                   help="lateral distance between the two roughness tracks")
-    track_coherence: float = param(0.5, ge=0, le=1,
-                                   help="correlation of the two tracks (its square: coherence)")
-    hill_grade_pct: float = param(3.0, unit="%", ge=0, le=15,
-                                  help="largest grade of the hills over the road")
-    hill_wavelength_m: float = param(400.0, unit="m", ge=20, le=10_000,
-                                     help="main wavelength of the hills")
-    cross_slope_pct: float = param(2.0, unit="%", ge=-8, le=8,
-                                   help="crossfall; > 0 falls from the centre line to the edges")
+    resolution_m: float = param(
+        0.05, unit="m", gt=0, le=0.5, help="roughness sample spacing; Nyquist 10 cycles/m at 0.05 m"
+    )
+    min_wavenumber_cpm: float = param(
+        0.011,
+        unit="cycles/m",
+        gt=0,
+        le=1.0,
+        help="ISO 8608 lower band limit; longer waves are hills",
+    )
+    track_spacing_m: float = param(
+        1.6, unit="m", gt=0, le=3.0, help="lateral distance between the two roughness tracks"
+    )
+    track_coherence: float = param(
+        0.5, ge=0, le=1, help="correlation of the two tracks (its square: coherence)"
+    )
+    hill_grade_pct: float = param(
+        3.0, unit="%", ge=0, le=15, help="largest grade of the hills over the road"
+    )
+    hill_wavelength_m: float = param(
+        400.0, unit="m", ge=20, le=10_000, help="main wavelength of the hills"
+    )
+    cross_slope_pct: float = param(
+        2.0, unit="%", ge=-8, le=8, help="crossfall; > 0 falls from the centre line to the edges"
+    )
     lane_width_m: float = param(3.5, unit="m", gt=2, le=6, help="ego lane centred on Y = 0")
     # param() returns dataclasses.field(default_factory=...), which RUF009 cannot see
     anomalies: list[Anomaly] = param(  # noqa: RUF009
-        default_factory=list, help="explicit anomalies; non-empty replaces the random ones")
-    anomaly_density_per_km: float = param(8.0, unit="1/km", ge=0, le=200,
-                                          help="mean number of random anomalies per km")
+        default_factory=list, help="explicit anomalies; non-empty replaces the random ones"
+    )
+    anomaly_density_per_km: float = param(
+        8.0, unit="1/km", ge=0, le=200, help="mean number of random anomalies per km"
+    )
     anomaly_mix: dict[str, float] = param(  # noqa: RUF009
-        default_factory=_default_mix, help="relative frequency of each random kind")
-    anomaly_min_spacing_m: float = param(15.0, unit="m", ge=0, le=1000,
-                                         help="least distance between random anomalies")
+        default_factory=_default_mix, help="relative frequency of each random kind"
+    )
+    anomaly_min_spacing_m: float = param(
+        15.0, unit="m", ge=0, le=1000, help="least distance between random anomalies"
+    )
 
     def validate(self, where: str) -> None:
         """Cross-field checks: anomaly kinds, mix weights, anomalies on the road."""
@@ -235,12 +273,17 @@ class RoadConfig:
                 )
             if not (isinstance(weight, (int, float)) and math.isfinite(weight) and weight >= 0):
                 raise ConfigError(f"{prefix}anomaly_mix.{kind} = {weight!r}: must be a number >= 0")
-        if (self.anomaly_density_per_km > 0 and not self.anomalies
-                and sum(self.anomaly_mix.values()) <= 0):
+        if (
+            self.anomaly_density_per_km > 0
+            and not self.anomalies
+            and sum(self.anomaly_mix.values()) <= 0
+        ):
             raise ConfigError(f"{prefix}anomaly_mix: weights must not all be zero")
         if self.resolution_m * 4 > self.length_m:
-            raise ConfigError(f"{prefix}resolution_m = {self.resolution_m} m: too coarse for"
-                              f" length_m = {self.length_m} m")
+            raise ConfigError(
+                f"{prefix}resolution_m = {self.resolution_m} m: too coarse for"
+                f" length_m = {self.length_m} m"
+            )
 
 
 # -- the road ---------------------------------------------------------------------------
@@ -302,11 +345,18 @@ class Road:
         """A flat, level road (no roughness, hills or crossfall), optionally with anomalies."""
         zeros = np.zeros(2)
         return cls(
-            length_m=length_m, lane_width_m=lane_width_m, dx_m=length_m,
-            left_profile=zeros, right_profile=zeros.copy(),
-            left_track_y_m=0.8, right_track_y_m=-0.8,
-            hill_amplitudes_m=np.zeros(0), hill_wavenumbers_rad_per_m=np.zeros(0),
-            hill_phases_rad=np.zeros(0), cross_slope=0.0, anomalies=anomalies,
+            length_m=length_m,
+            lane_width_m=lane_width_m,
+            dx_m=length_m,
+            left_profile=zeros,
+            right_profile=zeros.copy(),
+            left_track_y_m=0.8,
+            right_track_y_m=-0.8,
+            hill_amplitudes_m=np.zeros(0),
+            hill_wavenumbers_rad_per_m=np.zeros(0),
+            hill_phases_rad=np.zeros(0),
+            cross_slope=0.0,
+            anomalies=anomalies,
         )
 
     # -- components ------------------------------------------------------------------
@@ -314,8 +364,12 @@ class Road:
         """Elevation of the slow longitudinal part (hills) at X."""
         x_arr = np.asarray(x, dtype=float)
         out = np.zeros_like(x_arr)
-        for amp, k, ph in zip(self.hill_amplitudes_m, self.hill_wavenumbers_rad_per_m,
-                              self.hill_phases_rad, strict=True):
+        for amp, k, ph in zip(
+            self.hill_amplitudes_m,
+            self.hill_wavenumbers_rad_per_m,
+            self.hill_phases_rad,
+            strict=True,
+        ):
             out += amp * np.sin(k * x_arr + ph)
         return out
 
@@ -323,8 +377,12 @@ class Road:
         """dh/dX of the slow part (hills) at X (rise over run, positive uphill)."""
         x_arr = np.asarray(x, dtype=float)
         out = np.zeros_like(x_arr)
-        for amp, k, ph in zip(self.hill_amplitudes_m, self.hill_wavenumbers_rad_per_m,
-                              self.hill_phases_rad, strict=True):
+        for amp, k, ph in zip(
+            self.hill_amplitudes_m,
+            self.hill_wavenumbers_rad_per_m,
+            self.hill_phases_rad,
+            strict=True,
+        ):
             out += amp * k * np.cos(k * x_arr + ph)
         return out
 
@@ -372,8 +430,12 @@ class Road:
     def height(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.float64]:
         """Road elevation in m at world (X, Y); vectorised, broadcasts ``x`` against ``y``."""
         x_arr, y_arr = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
-        return (self.hills(x_arr) + self.crossfall(y_arr) + self.roughness(x_arr, y_arr)
-                + self.anomaly_height(x_arr, y_arr))
+        return (
+            self.hills(x_arr)
+            + self.crossfall(y_arr)
+            + self.roughness(x_arr, y_arr)
+            + self.anomaly_height(x_arr, y_arr)
+        )
 
 
 # -- generation -------------------------------------------------------------------------
@@ -432,14 +494,21 @@ def _random_anomaly(kind: str, x0: float, cfg: RoadConfig, rng: np.random.Genera
         h = rng.uniform(0.03, 0.10)
         length = rng.uniform(0.3, 4.0)
         ramp = min(h / math.tan(math.radians(rng.uniform(7.0, 25.0))), 0.45 * length)
-        return Anomaly(kind=kind, start_x_m=x0, length_m=length, height_m=h, width_m=lane,
-                       ramp_m=ramp)
+        return Anomaly(
+            kind=kind, start_x_m=x0, length_m=length, height_m=h, width_m=lane, ramp_m=ramp
+        )
     if kind == "cushion":
         h = rng.uniform(0.05, 0.08)
         length = rng.uniform(2.0, 3.5)
         ramp = min(h / math.tan(math.radians(rng.uniform(7.0, 12.0))), 0.45 * length)
-        return Anomaly(kind=kind, start_x_m=x0, length_m=length, height_m=h,
-                       width_m=rng.uniform(1.7, 1.9), ramp_m=ramp)
+        return Anomaly(
+            kind=kind,
+            start_x_m=x0,
+            length_m=length,
+            height_m=h,
+            width_m=rng.uniform(1.7, 1.9),
+            ramp_m=ramp,
+        )
     if kind == "pothole":
         depth = rng.uniform(0.02, 0.08)
         length = rng.uniform(0.3, 1.0)
@@ -448,16 +517,30 @@ def _random_anomaly(kind: str, x0: float, cfg: RoadConfig, rng: np.random.Genera
         centre = (half_track, -half_track, 0.0)[int(where)] + rng.uniform(-0.1, 0.1)
         if where == 2:
             width = min(width, cfg.track_spacing_m - 0.4)
-        return Anomaly(kind=kind, start_x_m=x0, length_m=length, height_m=-depth,
-                       center_y_m=centre, width_m=width, ramp_m=rng.uniform(0.0, 0.05))
+        return Anomaly(
+            kind=kind,
+            start_x_m=x0,
+            length_m=length,
+            height_m=-depth,
+            center_y_m=centre,
+            width_m=width,
+            ramp_m=rng.uniform(0.0, 0.05),
+        )
     if kind == "step":
         h = rng.uniform(0.01, 0.03) * rng.choice([-1.0, 1.0])
-        return Anomaly(kind=kind, start_x_m=x0, length_m=rng.uniform(0.0, 0.05), height_m=h,
-                       width_m=lane)
+        return Anomaly(
+            kind=kind, start_x_m=x0, length_m=rng.uniform(0.0, 0.05), height_m=h, width_m=lane
+        )
     if kind == "wave":
         length = rng.uniform(5.0, 30.0)
-        return Anomaly(kind=kind, start_x_m=x0, length_m=length, height_m=rng.uniform(0.01, 0.04),
-                       width_m=lane, wavelength_m=rng.uniform(1.5, 6.0))
+        return Anomaly(
+            kind=kind,
+            start_x_m=x0,
+            length_m=length,
+            height_m=rng.uniform(0.01, 0.04),
+            width_m=lane,
+            wavelength_m=rng.uniform(1.5, 6.0),
+        )
     raise ConfigError(f"anomaly kind {kind!r}: must be one of {list(ANOMALY_KINDS)}")
 
 
@@ -470,7 +553,8 @@ def _random_anomalies(cfg: RoadConfig, rng: np.random.Generator) -> list[Anomaly
     weights = np.array([cfg.anomaly_mix[k] for k in kinds], dtype=float)
     chosen: NDArray[np.int64] = (
         rng.choice(len(kinds), size=count, p=weights / weights.sum())
-        if kinds else np.zeros(0, dtype=np.int64)
+        if kinds
+        else np.zeros(0, dtype=np.int64)
     )
     out: list[Anomaly] = []
     last_end = -math.inf
@@ -494,16 +578,25 @@ def generate_road(cfg: RoadConfig, rng: np.random.Generator) -> Road:
     left = fft.irfft(left_c, n_samples)[:n_needed]
     right = fft.irfft(right_c, n_samples)[:n_needed]
     amps, ks, phases = _hills(cfg, rng)
-    anomalies = list(cfg.anomalies) if cfg.anomalies else (
-        _random_anomalies(cfg, rng) if cfg.anomaly_density_per_km > 0 else []
+    anomalies = (
+        list(cfg.anomalies)
+        if cfg.anomalies
+        else (_random_anomalies(cfg, rng) if cfg.anomaly_density_per_km > 0 else [])
     )
     half = 0.5 * cfg.track_spacing_m
     return Road(
-        length_m=cfg.length_m, lane_width_m=cfg.lane_width_m, dx_m=cfg.resolution_m,
-        left_profile=np.ascontiguousarray(left), right_profile=np.ascontiguousarray(right),
-        left_track_y_m=half, right_track_y_m=-half,
-        hill_amplitudes_m=amps, hill_wavenumbers_rad_per_m=ks, hill_phases_rad=phases,
-        cross_slope=cfg.cross_slope_pct / 100.0, anomalies=anomalies,
+        length_m=cfg.length_m,
+        lane_width_m=cfg.lane_width_m,
+        dx_m=cfg.resolution_m,
+        left_profile=np.ascontiguousarray(left),
+        right_profile=np.ascontiguousarray(right),
+        left_track_y_m=half,
+        right_track_y_m=-half,
+        hill_amplitudes_m=amps,
+        hill_wavenumbers_rad_per_m=ks,
+        hill_phases_rad=phases,
+        cross_slope=cfg.cross_slope_pct / 100.0,
+        anomalies=anomalies,
     )
 
 

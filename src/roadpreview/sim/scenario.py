@@ -75,7 +75,9 @@ class ConditionSegment:
         help="Koschmieder extinction; 0.08/m = about 37 m meteorological visibility",
     )
     light: float = param(
-        0.001, ge=0.0, le=1.0,
+        0.001,
+        ge=0.0,
+        le=1.0,
         help="scene light at night, a fraction of daylight (street-lit night ~ 0.001)",
     )
     ramp_s: float = param(1.5, unit="s", ge=0.0, le=30.0, help="fade in/out (a tunnel: 0)")

@@ -64,79 +64,128 @@ class VehicleParams:
     per corner (``suspension_from = "rates"``); see ``rates()``.
     """
 
-    model: str = param("7dof", choices=MODELS,
-                       help="7dof: body + 4 wheel masses on tyre springs; 3dof: rigid tyres")
-    sprung_mass_kg: float = param(1400.0, unit="kg", gt=0, le=60_000,
-                                  help="body mass (a mid-size car, driver and fuel)")
-    pitch_inertia_kgm2: float = param(2300.0, unit="kg m^2", gt=0, le=1e6,
-                                      help="body pitch inertia about the CG (dynamic index ~0.9)")
-    roll_inertia_kgm2: float = param(500.0, unit="kg m^2", gt=0, le=1e6,
-                                     help="body roll inertia about the CG")
+    model: str = param(
+        "7dof",
+        choices=MODELS,
+        help="7dof: body + 4 wheel masses on tyre springs; 3dof: rigid tyres",
+    )
+    sprung_mass_kg: float = param(
+        1400.0, unit="kg", gt=0, le=60_000, help="body mass (a mid-size car, driver and fuel)"
+    )
+    pitch_inertia_kgm2: float = param(
+        2300.0,
+        unit="kg m^2",
+        gt=0,
+        le=1e6,
+        help="body pitch inertia about the CG (dynamic index ~0.9)",
+    )
+    roll_inertia_kgm2: float = param(
+        500.0, unit="kg m^2", gt=0, le=1e6, help="body roll inertia about the CG"
+    )
     cg_to_front_axle_m: float = param(1.2, unit="m", gt=0, le=5, help="a: CG to front axle")
     cg_to_rear_axle_m: float = param(1.5, unit="m", gt=0, le=8, help="b: CG to rear axle")
     track_m: float = param(1.55, unit="m", gt=0, le=3, help="lateral wheel spacing, both axles")
-    suspension_from: str = param("frequency", choices=("frequency", "rates"),
-                                 help="derive rates from ride frequencies, or give them")
-    front_ride_freq_hz: float = param(1.2, unit="Hz", ge=0.5, le=3.0,
-                                      help="front body (ride) natural frequency; cars 1.0-1.6")
-    rear_ride_freq_hz: float = param(1.35, unit="Hz", ge=0.5, le=3.0,
-                                     help="rear ride frequency, a bit above the front (flat ride)")
+    suspension_from: str = param(
+        "frequency",
+        choices=("frequency", "rates"),
+        help="derive rates from ride frequencies, or give them",
+    )
+    front_ride_freq_hz: float = param(
+        1.2, unit="Hz", ge=0.5, le=3.0, help="front body (ride) natural frequency; cars 1.0-1.6"
+    )
+    rear_ride_freq_hz: float = param(
+        1.35,
+        unit="Hz",
+        ge=0.5,
+        le=3.0,
+        help="rear ride frequency, a bit above the front (flat ride)",
+    )
     front_damping_ratio: float = param(0.3, ge=0, le=1.5, help="front ride damping ratio; 0.2-0.4")
     rear_damping_ratio: float = param(0.3, ge=0, le=1.5, help="rear ride damping ratio")
-    front_spring_npm: float | None = param(None, unit="N/m", gt=0, le=1e7,
-                                           help="front corner spring rate (rates mode)")
-    rear_spring_npm: float | None = param(None, unit="N/m", gt=0, le=1e7,
-                                          help="rear corner spring rate (rates mode)")
-    front_damper_nspm: float | None = param(None, unit="N s/m", ge=0, le=1e6,
-                                            help="front corner damper rate (rates mode)")
-    rear_damper_nspm: float | None = param(None, unit="N s/m", ge=0, le=1e6,
-                                           help="rear corner damper rate (rates mode)")
-    front_unsprung_kg: float = param(40.0, unit="kg", gt=0, le=2000,
-                                     help="wheel, brake, upright per front corner (7dof)")
-    rear_unsprung_kg: float = param(35.0, unit="kg", gt=0, le=2000,
-                                    help="unsprung mass per rear corner (7dof)")
-    tyre_stiffness_npm: float = param(250e3, unit="N/m", gt=0, le=1e8,
-                                      help="vertical tyre rate (7dof); a car tyre 200-300 kN/m")
-    wheel_radius_m: float = param(0.31, unit="m", ge=0, le=1.0,
-                                  help="rigid-disc envelope of the road (wheel bridging); 0 = off")
-    contact_length_m: float = param(0.15, unit="m", ge=0, le=0.5,
-                                    help="moving average over the contact patch; 0 = off")
+    front_spring_npm: float | None = param(
+        None, unit="N/m", gt=0, le=1e7, help="front corner spring rate (rates mode)"
+    )
+    rear_spring_npm: float | None = param(
+        None, unit="N/m", gt=0, le=1e7, help="rear corner spring rate (rates mode)"
+    )
+    front_damper_nspm: float | None = param(
+        None, unit="N s/m", ge=0, le=1e6, help="front corner damper rate (rates mode)"
+    )
+    rear_damper_nspm: float | None = param(
+        None, unit="N s/m", ge=0, le=1e6, help="rear corner damper rate (rates mode)"
+    )
+    front_unsprung_kg: float = param(
+        40.0, unit="kg", gt=0, le=2000, help="wheel, brake, upright per front corner (7dof)"
+    )
+    rear_unsprung_kg: float = param(
+        35.0, unit="kg", gt=0, le=2000, help="unsprung mass per rear corner (7dof)"
+    )
+    tyre_stiffness_npm: float = param(
+        250e3, unit="N/m", gt=0, le=1e8, help="vertical tyre rate (7dof); a car tyre 200-300 kN/m"
+    )
+    wheel_radius_m: float = param(
+        0.31,
+        unit="m",
+        ge=0,
+        le=1.0,
+        help="rigid-disc envelope of the road (wheel bridging); 0 = off",
+    )
+    contact_length_m: float = param(
+        0.15, unit="m", ge=0, le=0.5, help="moving average over the contact patch; 0 = off"
+    )
     # param() returns dataclasses.field(default_factory=...), which RUF009 cannot see
     shape: VehicleShape = param(  # noqa: RUF009
-        default_factory=VehicleShape, help="outer body box; its cg_height_m is the dive lever")
+        default_factory=VehicleShape, help="outer body box; its cg_height_m is the dive lever"
+    )
 
     def validate(self, where: str) -> None:
         """Cross-field checks: axles inside the body, rates given in the chosen mode, tyres."""
         prefix = f"{where}." if where else ""
         s = self.shape
         if self.cg_to_front_axle_m >= s.cg_to_front_m:
-            raise ConfigError(f"{prefix}cg_to_front_axle_m = {self.cg_to_front_axle_m} m: must be"
-                              f" < shape.cg_to_front_m = {s.cg_to_front_m} m")
+            raise ConfigError(
+                f"{prefix}cg_to_front_axle_m = {self.cg_to_front_axle_m} m: must be"
+                f" < shape.cg_to_front_m = {s.cg_to_front_m} m"
+            )
         if self.cg_to_rear_axle_m >= s.cg_to_rear_m:
-            raise ConfigError(f"{prefix}cg_to_rear_axle_m = {self.cg_to_rear_axle_m} m: must be"
-                              f" < shape length - cg_to_front = {s.cg_to_rear_m} m")
+            raise ConfigError(
+                f"{prefix}cg_to_rear_axle_m = {self.cg_to_rear_axle_m} m: must be"
+                f" < shape length - cg_to_front = {s.cg_to_rear_m} m"
+            )
         if self.track_m >= s.width_m:
-            raise ConfigError(f"{prefix}track_m = {self.track_m} m: must be < shape.width_m ="
-                              f" {s.width_m} m")
+            raise ConfigError(
+                f"{prefix}track_m = {self.track_m} m: must be < shape.width_m = {s.width_m} m"
+            )
         if not 0 < s.cg_height_m < s.height_m:
-            raise ConfigError(f"{prefix}shape.cg_height_m = {s.cg_height_m} m: must be in"
-                              f" (0, shape.height_m)")
-        rate_names = ("front_spring_npm", "rear_spring_npm", "front_damper_nspm",
-                      "rear_damper_nspm")
+            raise ConfigError(
+                f"{prefix}shape.cg_height_m = {s.cg_height_m} m: must be in (0, shape.height_m)"
+            )
+        rate_names = (
+            "front_spring_npm",
+            "rear_spring_npm",
+            "front_damper_nspm",
+            "rear_damper_nspm",
+        )
         for name in rate_names:
             value = getattr(self, name)
             if self.suspension_from == "rates" and value is None:
                 raise ConfigError(f"{prefix}{name}: missing (suspension_from = 'rates')")
             if self.suspension_from == "frequency" and value is not None:
-                raise ConfigError(f"{prefix}{name}: given, but suspension_from = 'frequency'"
-                                  " derives it (set suspension_from = 'rates')")
+                raise ConfigError(
+                    f"{prefix}{name}: given, but suspension_from = 'frequency'"
+                    " derives it (set suspension_from = 'rates')"
+                )
         if self.model == "7dof" and self.suspension_from == "frequency":
-            for axle, freq in (("front", self.front_ride_freq_hz),
-                               ("rear", self.rear_ride_freq_hz)):
+            for axle, freq in (
+                ("front", self.front_ride_freq_hz),
+                ("rear", self.rear_ride_freq_hz),
+            ):
                 ride = self._corner_mass(axle) * (2 * math.pi * freq) ** 2
                 if ride >= 0.5 * self.tyre_stiffness_npm:
-                    raise ConfigError(f"{prefix}tyre_stiffness_npm = {self.tyre_stiffness_npm}"
-                                      f" N/m: too soft for a {freq} Hz {axle} ride")
+                    raise ConfigError(
+                        f"{prefix}tyre_stiffness_npm = {self.tyre_stiffness_npm}"
+                        f" N/m: too soft for a {freq} Hz {axle} ride"
+                    )
 
     @property
     def wheelbase_m(self) -> float:
@@ -157,15 +206,21 @@ class VehicleParams:
         (7dof); the damper is c = 2 zeta m_c w.
         """
         if self.suspension_from == "rates":
-            values = (self.front_spring_npm, self.rear_spring_npm, self.front_damper_nspm,
-                      self.rear_damper_nspm)
+            values = (
+                self.front_spring_npm,
+                self.rear_spring_npm,
+                self.front_damper_nspm,
+                self.rear_damper_nspm,
+            )
             if any(v is None for v in values):
                 raise ConfigError("suspension rates missing (suspension_from = 'rates')")
             kf, kr, cf, cr = (float(v) for v in values)  # type: ignore[arg-type]
             return SuspensionRates(kf, kr, cf, cr)
         out = []
-        for axle, freq, zeta in (("front", self.front_ride_freq_hz, self.front_damping_ratio),
-                                 ("rear", self.rear_ride_freq_hz, self.rear_damping_ratio)):
+        for axle, freq, zeta in (
+            ("front", self.front_ride_freq_hz, self.front_damping_ratio),
+            ("rear", self.rear_ride_freq_hz, self.rear_damping_ratio),
+        ):
             m_c = self._corner_mass(axle)
             w = 2 * math.pi * freq
             k_ride = m_c * w * w
@@ -238,23 +293,32 @@ class VehicleModel:
             mu = np.array([p.front_unsprung_kg] * 2 + [p.rear_unsprung_kg] * 2)
             kt = np.full(4, p.tyre_stiffness_npm)
             self.m = linalg.block_diag(m_body, np.diag(mu))
-            self.k = np.block([[t_mat.T @ np.diag(k) @ t_mat, -t_mat.T @ np.diag(k)],
-                               [-np.diag(k) @ t_mat, np.diag(k + kt)]])
-            self.c = np.block([[t_mat.T @ np.diag(c) @ t_mat, -t_mat.T @ np.diag(c)],
-                               [-np.diag(c) @ t_mat, np.diag(c)]])
+            self.k = np.block(
+                [
+                    [t_mat.T @ np.diag(k) @ t_mat, -t_mat.T @ np.diag(k)],
+                    [-np.diag(k) @ t_mat, np.diag(k + kt)],
+                ]
+            )
+            self.c = np.block(
+                [
+                    [t_mat.T @ np.diag(c) @ t_mat, -t_mat.T @ np.diag(c)],
+                    [-np.diag(c) @ t_mat, np.diag(c)],
+                ]
+            )
             self.kw = np.vstack([np.zeros((3, 4)), np.diag(kt)])
             self.cw = np.zeros((7, 4))
             self.qa = np.concatenate([qa_body, np.zeros(4)])
         self.ndof = self.m.shape[0]
         self._m_inv = np.linalg.inv(self.m)
         nd = self.ndof
-        self.a_mat = np.block([[np.zeros((nd, nd)), np.eye(nd)],
-                               [-self._m_inv @ self.k, -self._m_inv @ self.c]])
+        self.a_mat = np.block(
+            [[np.zeros((nd, nd)), np.eye(nd)], [-self._m_inv @ self.k, -self._m_inv @ self.c]]
+        )
         # inputs u = (w_1..w_4, a_x); B0 acts on u, B1 on du/dt
-        self.b0 = np.vstack([np.zeros((nd, 5)),
-                             self._m_inv @ np.column_stack([self.kw, self.qa])])
-        self.b1 = np.vstack([np.zeros((nd, 5)),
-                             self._m_inv @ np.column_stack([self.cw, np.zeros(nd)])])
+        self.b0 = np.vstack([np.zeros((nd, 5)), self._m_inv @ np.column_stack([self.kw, self.qa])])
+        self.b1 = np.vstack(
+            [np.zeros((nd, 5)), self._m_inv @ np.column_stack([self.cw, np.zeros(nd)])]
+        )
         self._static_gain = np.linalg.solve(self.k, np.column_stack([self.kw, self.qa]))
         self._discrete: dict[float, _Discrete] = {}
 
@@ -294,12 +358,12 @@ class VehicleModel:
         # Van Loan: expm([[A, I, 0], [0, 0, I], [0, 0, 0]] dt) holds Phi, Gamma0, Gamma2
         big = np.zeros((3 * ns, 3 * ns))
         big[:ns, :ns] = self.a_mat
-        big[:ns, ns:2 * ns] = np.eye(ns)
-        big[ns:2 * ns, 2 * ns:] = np.eye(ns)
+        big[:ns, ns : 2 * ns] = np.eye(ns)
+        big[ns : 2 * ns, 2 * ns :] = np.eye(ns)
         e = linalg.expm(big * dt)
         phi = e[:ns, :ns]
-        gamma0 = e[:ns, ns:2 * ns]
-        gamma2 = e[:ns, 2 * ns:]
+        gamma0 = e[:ns, ns : 2 * ns]
+        gamma2 = e[:ns, 2 * ns :]
         g0 = gamma0 @ self.b0
         g1 = (gamma2 @ self.b0 + gamma0 @ self.b1) / dt
         lam, vec = np.linalg.eig(self.a_mat)
@@ -375,8 +439,13 @@ class VehicleModel:
                 x[i + 1] = phi @ x[i] + g[i]
         q, qd = x[:, :nd], x[:, nd:]
         wd = np.gradient(w_arr, t_arr, axis=0)
-        forces = (-q @ self.k.T - qd @ self.c.T + w_arr @ self.kw.T + wd @ self.cw.T
-                  + a_arr[:, None] * self.qa[None, :])
+        forces = (
+            -q @ self.k.T
+            - qd @ self.c.T
+            + w_arr @ self.kw.T
+            + wd @ self.cw.T
+            + a_arr[:, None] * self.qa[None, :]
+        )
         qdd = forces @ self._m_inv.T
         return ModelResponse(t=t_arr, q=q, qd=qd, qdd=qdd)
 
@@ -398,7 +467,7 @@ def _disc_envelope(h: FloatArray, radius_m: float, ds: float) -> FloatArray:
             continue
         s = j * ds
         drop = radius_m - math.sqrt(max(0.0, radius_m * radius_m - s * s))
-        np.maximum(out, padded[half + j: half + j + n] - drop, out=out)
+        np.maximum(out, padded[half + j : half + j + n] - drop, out=out)
     return out
 
 
@@ -452,8 +521,23 @@ def _rotation(yaw: FloatArray, pitch: FloatArray, roll: FloatArray) -> FloatArra
     return r
 
 
-_SERIES = ("t", "x", "y", "z", "v", "a", "pitch", "roll", "yaw", "pitch_rate", "roll_rate",
-           "yaw_rate", "heave", "accel_world", "wheel_road")
+_SERIES = (
+    "t",
+    "x",
+    "y",
+    "z",
+    "v",
+    "a",
+    "pitch",
+    "roll",
+    "yaw",
+    "pitch_rate",
+    "roll_rate",
+    "yaw_rate",
+    "heave",
+    "accel_world",
+    "wheel_road",
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -500,8 +584,9 @@ class BodyMotion:
         t0, t1 = float(self.t[0]), float(self.t[-1])
         tol = 1e-9 * max(1.0, abs(t1))
         if tq.size and (tq.min() < t0 - tol or tq.max() > t1 + tol):
-            raise InputDataError(f"times: must lie within the simulated [{t0}, {t1}] s,"
-                                 f" got [{tq.min()}, {tq.max()}]")
+            raise InputDataError(
+                f"times: must lie within the simulated [{t0}, {t1}] s, got [{tq.min()}, {tq.max()}]"
+            )
         tc = np.clip(tq, t0, t1)
         pos = np.interp(tc, self.t, np.arange(self.t.size, dtype=float))
         i0 = np.minimum(pos.astype(np.intp), self.t.size - 2)
@@ -512,16 +597,28 @@ class BodyMotion:
             f = frac.reshape((-1,) + (1,) * (arr.ndim - 1))
             values[name] = arr[i0] * (1 - f) + arr[i0 + 1] * f
         values["t"] = tq
-        return BodyMotion(**values, params=self.params, vehicle_id=self.vehicle_id,
-                          is_lead=self.is_lead, appearance=self.appearance)
+        return BodyMotion(
+            **values,
+            params=self.params,
+            vehicle_id=self.vehicle_id,
+            is_lead=self.is_lead,
+            appearance=self.appearance,
+        )
 
     def pose_at(self, t: float) -> VehiclePose:
         """The CG pose at time ``t`` (interpolated)."""
         s = self.sample([t])
         return VehiclePose(
-            vehicle_id=self.vehicle_id, x_m=float(s.x[0]), y_m=float(s.y[0]), z_m=float(s.z[0]),
-            pitch_rad=float(s.pitch[0]), roll_rad=float(s.roll[0]), yaw_rad=float(s.yaw[0]),
-            shape=self.shape, appearance=self.appearance, is_lead=self.is_lead,
+            vehicle_id=self.vehicle_id,
+            x_m=float(s.x[0]),
+            y_m=float(s.y[0]),
+            z_m=float(s.z[0]),
+            pitch_rad=float(s.pitch[0]),
+            roll_rad=float(s.roll[0]),
+            yaw_rad=float(s.yaw[0]),
+            shape=self.shape,
+            appearance=self.appearance,
+            is_lead=self.is_lead,
         )
 
     def points_world(self, times: ArrayLike, offsets_body: ArrayLike) -> FloatArray:
@@ -573,18 +670,34 @@ def simulate_vehicle(
     # static equilibrium on the smooth road (no roughness or anomalies), for the heave
     hills_front = road.hills(x_arr + params.cg_to_front_axle_m)
     hills_rear = road.hills(x_arr - params.cg_to_rear_axle_m)
-    w_slow = (np.column_stack([hills_front, hills_front, hills_rear, hills_rear])
-              + road.crossfall(lateral_m + model.corner_y)[None, :])
+    w_slow = (
+        np.column_stack([hills_front, hills_front, hills_rear, hills_rear])
+        + road.crossfall(lateral_m + model.corner_y)[None, :]
+    )
     z_static = model.static_state(w_slow)[:, 0]
     cg_h = params.shape.cg_height_m
     zeros = np.zeros(n)
     accel = np.column_stack([a_arr, zeros, qdd[:, 0]])
     return BodyMotion(
-        t=t_arr, x=x_arr, y=np.full(n, float(lateral_m)), z=cg_h + q[:, 0], v=v_arr, a=a_arr,
-        pitch=q[:, 1].copy(), roll=q[:, 2].copy(), yaw=zeros.copy(),
-        pitch_rate=qd[:, 1].copy(), roll_rate=qd[:, 2].copy(), yaw_rate=zeros.copy(),
-        heave=q[:, 0] - z_static, accel_world=accel, wheel_road=w, params=params,
-        vehicle_id=vehicle_id, is_lead=is_lead, appearance=appearance,
+        t=t_arr,
+        x=x_arr,
+        y=np.full(n, float(lateral_m)),
+        z=cg_h + q[:, 0],
+        v=v_arr,
+        a=a_arr,
+        pitch=q[:, 1].copy(),
+        roll=q[:, 2].copy(),
+        yaw=zeros.copy(),
+        pitch_rate=qd[:, 1].copy(),
+        roll_rate=qd[:, 2].copy(),
+        yaw_rate=zeros.copy(),
+        heave=q[:, 0] - z_static,
+        accel_world=accel,
+        wheel_road=w,
+        params=params,
+        vehicle_id=vehicle_id,
+        is_lead=is_lead,
+        appearance=appearance,
     )
 
 

@@ -17,7 +17,7 @@ import importlib
 from typing import Any
 
 from roadpreview.camera import CameraModel
-from roadpreview.errors import ConfigError, MissingDependencyError
+from roadpreview.registry import build
 from roadpreview.vision.base import Detection, FrameContext, LeadFinder
 
 #: config name -> (module, class, config class)
@@ -30,22 +30,9 @@ FINDERS: dict[str, tuple[str, str, str]] = {
 
 def make_finder(name: str, camera: CameraModel, **options: Any) -> LeadFinder:
     """Build the lead finder registered as ``name``; ``options`` fill its config dataclass."""
-    try:
-        module_name, cls_name, cfg_name = FINDERS[name]
-    except KeyError:
-        raise ConfigError(
-            f"vision.finder = {name!r}: unknown; choose one of {sorted(FINDERS)}"
-        ) from None
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:  # an optional dependency of that finder is missing
-        raise MissingDependencyError(
-            f"lead finder {name!r} needs the package {exc.name!r}: pip install {exc.name}"
-        ) from None
-    from roadpreview.configtools import from_mapping
-
-    config = from_mapping(getattr(module, cfg_name), options, where=f"vision.{name}")
-    finder: LeadFinder = getattr(module, cls_name)(camera, config)
+    finder: LeadFinder = build(
+        FINDERS, name, camera, key="vision.finder", where=f"vision.{name}", options=options
+    )
     return finder
 
 
