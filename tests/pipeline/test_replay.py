@@ -14,7 +14,7 @@ import pytest
 from roadpreview.canbus import load_database, read_can_log
 from roadpreview.canbus.output import OutputDecoder, ReceivedAlert, ReceivedStatus
 from roadpreview.cli.main import main
-from roadpreview.errors import InputDataError
+from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline import Pipeline, PipelineConfig
 from roadpreview.pipeline.replay import ReplayInputs, replay
@@ -125,3 +125,12 @@ def test_no_imu_on_the_bus_falls_back_to_visual_only(short_demo) -> None:  # typ
     inputs.can_logs = []
     result = replay(inputs, max_frames=120)
     assert result.mode_changes[-1][1] == FusionMode.VISUAL_ONLY
+
+
+def test_example_configuration_loads_and_unknown_keys_are_named(tmp_path: Path) -> None:
+    example = Path(__file__).resolve().parents[2] / "data" / "roadpreview.example.toml"
+    assert PipelineConfig.load(example) == PipelineConfig()
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[fusion]\nbackend = 'kalman'\nbakend = 'x'\n")
+    with pytest.raises(ConfigError, match=r"fusion\.bakend"):
+        PipelineConfig.load(bad)
