@@ -199,10 +199,12 @@ class StreamingFusion(ABC):
         return None
 
     def _bk_snapshot(self) -> Any:
-        raise NotImplementedError
+        """A copy of the back end's state; only called when ``can_rewind`` is True."""
+        raise TypeError(f"{type(self).__name__} sets can_rewind but cannot copy its state")
 
     def _bk_restore(self, snap: Any) -> None:
-        raise NotImplementedError
+        """Put back a `_bk_snapshot`; only called when ``can_rewind`` is True."""
+        raise TypeError(f"{type(self).__name__} sets can_rewind but cannot restore its state")
 
     #: consecutive gated measurements that make vision lost
     max_rejections = 5
