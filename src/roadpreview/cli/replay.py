@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from roadpreview.cli._pipeline_args import add_pipeline_arguments, pipeline_config
+
 
 def add_subparser(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
@@ -19,7 +21,7 @@ def add_subparser(sub: Any) -> None:
     )
     p.add_argument("input", type=Path, help="a recording folder, or a video file")
     p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--config", type=Path, help="pipeline configuration (TOML)")
+    add_pipeline_arguments(p)
     p.add_argument("--camera", type=Path, help="camera calibration (TOML), for a video input")
     p.add_argument("--can", type=Path, action="append", default=[], help="a CAN log (repeatable)")
     p.add_argument("--imu-csv", type=Path, help="an IMU CSV (smartphone style)")
@@ -29,15 +31,6 @@ def add_subparser(sub: Any) -> None:
         type=float,
         default=None,
         help="time of the first frame on the log clock (s); default: first CAN frame",
-    )
-    p.add_argument("--finder", choices=("motion", "onnx", "box"), help="override the lead finder")
-    p.add_argument(
-        "--estimator", choices=("robust", "essential", "none"), help="override the pitch estimator"
-    )
-    p.add_argument(
-        "--fusion",
-        choices=("kalman", "factor-graph", "visual-only", "imu-only", "none"),
-        help="override the fusion back end",
     )
     p.add_argument(
         "--truth",
@@ -51,7 +44,6 @@ def add_subparser(sub: Any) -> None:
 def _run(args: argparse.Namespace) -> int:
     from roadpreview.camera import CameraModel
     from roadpreview.errors import ConfigError
-    from roadpreview.pipeline.config import PipelineConfig
     from roadpreview.pipeline.replay import (
         ReplayInputs,
         format_modes,
@@ -76,8 +68,7 @@ def _run(args: argparse.Namespace) -> int:
         )
         if args.truth:
             raise ConfigError("--truth needs a simulator recording folder")
-    config = PipelineConfig.load(args.config) if args.config else PipelineConfig()
-    config = config.with_overrides(finder=args.finder, estimator=args.estimator, fusion=args.fusion)
+    config = pipeline_config(args)
     result = replay(
         inputs, config, args.out, annotated_video=args.annotate, progress=print_progress
     )

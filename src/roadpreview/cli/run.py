@@ -7,6 +7,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from roadpreview.cli._pipeline_args import add_pipeline_arguments, pipeline_config
+
 
 def add_subparser(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
@@ -19,7 +21,7 @@ def add_subparser(sub: Any) -> None:
             "Frame and CAN time stamps share the Unix clock (time.time())."
         ),
     )
-    p.add_argument("--config", type=Path, help="pipeline configuration (TOML)")
+    add_pipeline_arguments(p)
     p.add_argument("--camera", type=Path, required=True, help="camera calibration (TOML)")
     p.add_argument(
         "--source",
@@ -45,21 +47,11 @@ def add_subparser(sub: Any) -> None:
         type=Path,
         help="write the RP_ALERT frames sent to this CAN log (.blf, .asc, .log, ...)",
     )
-    p.add_argument("--finder", choices=("motion", "onnx", "box"), help="override the lead finder")
-    p.add_argument(
-        "--estimator", choices=("robust", "essential", "none"), help="override the pitch estimator"
-    )
-    p.add_argument(
-        "--fusion",
-        choices=("kalman", "factor-graph", "visual-only", "imu-only", "none"),
-        help="override the fusion back end",
-    )
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
     from roadpreview.camera import CameraModel
-    from roadpreview.pipeline.config import PipelineConfig
     from roadpreview.pipeline.daemon import (
         Daemon,
         DaemonOptions,
@@ -67,8 +59,7 @@ def _run(args: argparse.Namespace) -> int:
         iter_summary_lines,
     )
 
-    config = PipelineConfig.load(args.config) if args.config else PipelineConfig()
-    config = config.with_overrides(finder=args.finder, estimator=args.estimator, fusion=args.fusion)
+    config = pipeline_config(args)
     overrides = {
         "input_interface": args.can_interface,
         "input_channel": args.can_channel,
