@@ -37,7 +37,7 @@ from roadpreview.fusion import FusedPitch, VisualPitch, compensation, make_fusio
 from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pitch import make_estimator
-from roadpreview.vision.frontend import VisionFrontEnd
+from roadpreview.vision.frontend import FrameVision, VisionFrontEnd
 
 log = logging.getLogger(__name__)
 
@@ -236,8 +236,25 @@ class Pipeline:
     # -- the frame step -----------------------------------------------------------------
     def push_frame(self, t: float, frame: Any) -> FrameResult:
         """Process one camera frame taken at ``t`` (BGR uint8; None or garbage: no target)."""
+        return self.push_vision(t, self.vision.process(t, frame, pitch_rad=self._phi))
+
+    @property
+    def pitch_rad(self) -> float:
+        """The fused pitch of the last frame (0 before the first): the vision's horizon."""
+        return self._phi
+
+    @property
+    def last_gyro_t(self) -> float:
+        """Time stamp of the last gyro sample taken (-inf before the first): the daemon's
+        IMU watchdog."""
+        return self._last_gyro_t
+
+    def push_vision(self, t: float, fv: FrameVision) -> FrameResult:
+        """Steps 2-5 for a frame whose vision step is done (`push_frame` = vision + this).
+
+        The evaluation runs one vision front end per recording and feeds its output to
+        one pipeline per method, so that the methods differ only where they should."""
         cfg = self.config
-        fv = self.vision.process(t, frame, pitch_rad=self._phi)
         bg = fv.background
         pitch_reason = ""
         if bg.key_index != self._key_index:

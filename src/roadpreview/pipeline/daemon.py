@@ -460,7 +460,7 @@ class Daemon:
 
     def _imu_watchdog(self, t: float) -> None:
         # the pipeline's time of the newest gyro sample (no public accessor yet)
-        last_gyro = self.pipeline._last_gyro_t
+        last_gyro = self.pipeline.last_gyro_t
         if not math.isfinite(self._first_t):
             self._first_t = t
         lost = t - max(last_gyro, self._first_t) > self.config.can.imu_timeout_s
