@@ -72,7 +72,7 @@ def _random_statuses(n: int, seed: int = 1) -> list[Status]:
             time_offset_s=float(rng.uniform(-0.127, 0.127)),
             suppressed=SuppressionReason(int(rng.integers(0, 4))),
             alerts_sent=int(rng.integers(0, 1000)),
-            input_errors=int(rng.integers(0, 40)),
+            input_errors_total=int(rng.integers(0, 40)),
             frames_processed=int(rng.integers(0, 10**6)),
         )
         for _ in range(n)
@@ -111,6 +111,9 @@ def test_statuses_decode_with_cantools_to_the_same_values(strict_db: Database) -
     enc = StatusEncoder()
     msg_def = strict_db.get_message_by_name(RP_STATUS)
     for status in _random_statuses(300):
+        new_errors = status.input_errors_total - enc.errors_sent
+        if new_errors < 0:  # a lower total: the count restarted
+            new_errors = status.input_errors_total
         got = msg_def.decode(enc.encode(status).data, decode_choices=False)
         assert status.pitch_rad is not None
         assert status.gyro_bias_rad_s is not None
@@ -128,7 +131,7 @@ def test_statuses_decode_with_cantools_to_the_same_values(strict_db: Database) -
         assert got["StatusFusionMode"] == int(status.mode)
         assert got["StatusSuppression"] == int(status.suppressed)
         assert got["StatusAlertCount"] == status.alerts_sent % 16
-        assert got["StatusInputErrors"] == min(status.input_errors, 15)
+        assert got["StatusInputErrors"] == min(new_errors, 15)
         assert got["StatusHeartbeat"] == status.frames_processed % 8
 
 
@@ -253,3 +256,13 @@ def test_alerts_written_to_a_log_read_back(tmp_path: Path, suffix: str) -> None:
     assert all(isinstance(b, ReceivedAlert) for b in back)
     assert [b.t_rx_s for b in back] == pytest.approx([a.t_emit_s for a in alerts], abs=2e-6)  # type: ignore[union-attr]
     assert rx.problems == {}
+
+
+def test_status_input_errors_count_since_the_previous_frame(strict_db: Database) -> None:
+    enc = StatusEncoder()
+    msg_def = strict_db.get_message_by_name(RP_STATUS)
+    sent = []
+    for total in (0, 3, 3, 10, 40, 41):
+        frame = enc.encode(Status(mode=FusionMode.FUSED, input_errors_total=total))
+        sent.append(msg_def.decode(frame.data, decode_choices=False)["StatusInputErrors"])
+    assert sent == [0, 3, 0, 7, 15, 1]  # 30 new errors saturate at 15

@@ -56,7 +56,8 @@ class Status:
     time_offset_s: float | None = None  #: IMU stamp minus camera stamp, s
     suppressed: SuppressionReason = SuppressionReason.NONE  #: why alerts are held back now
     alerts_sent: int = 0  #: alerts sent since start
-    input_errors: int = 0  #: input frames dropped since the previous status
+    #: input frames dropped since start; the encoder sends the increase since its last frame
+    input_errors_total: int = 0
     frames_processed: int = 0  #: camera frames processed since start
 
 
@@ -131,9 +132,14 @@ class StatusEncoder(_ProtectedEncoder):
 
     def __init__(self, db: Database | None = None, *, channel: int | str | None = None) -> None:
         super().__init__(RP_STATUS, db, channel)
+        self.errors_sent = 0  #: ``input_errors_total`` of the last encoded frame
 
     def values(self, status: Status) -> dict[str, float | int | str]:
-        """The physical signal values (before E2E) of ``status``."""
+        """The physical signal values (before E2E) of ``status`` as the next frame.
+
+        ``StatusInputErrors`` is the increase of ``input_errors_total`` since the last
+        frame `encode` made (the DBC's "since the previous status frame"), saturating;
+        a total that went down (a restarted pipeline) counts from zero again."""
 
         def scaled(x: float | None, factor: float) -> float | None:
             return None if x is None else x * factor
@@ -148,13 +154,19 @@ class StatusEncoder(_ProtectedEncoder):
             ),
             "StatusTimeOffset": self._fit("StatusTimeOffset", scaled(status.time_offset_s, 1e3)),
             "StatusAlertCount": status.alerts_sent % 16,
-            "StatusInputErrors": min(max(status.input_errors, 0), 15),
+            "StatusInputErrors": min(self._new_errors(status), 15),
             "StatusHeartbeat": status.frames_processed % 8,
         }
 
+    def _new_errors(self, status: Status) -> int:
+        total = max(status.input_errors_total, 0)
+        return total - self.errors_sent if total >= self.errors_sent else total
+
     def encode(self, status: Status, *, timestamp: float = 0.0) -> can.Message:
         """The next ``RP_STATUS`` frame."""
-        return self._frame(self.values(status), float(timestamp))
+        frame = self._frame(self.values(status), float(timestamp))
+        self.errors_sent = max(status.input_errors_total, 0)
+        return frame
 
 
 def alert_frames(alerts: Iterable[Alert], encoder: AlertEncoder | None = None) -> list[can.Message]:

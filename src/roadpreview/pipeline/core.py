@@ -364,6 +364,6 @@ class Pipeline:
             time_offset_s=r.time_offset if math.isfinite(r.time_offset) else None,
             suppressed=r.suppressed,
             alerts_sent=self.alerts_sent,
-            input_errors=self.can_decoder.stats.skipped,
+            input_errors_total=self.can_decoder.stats.skipped,
             frames_processed=self.frames,
         )
