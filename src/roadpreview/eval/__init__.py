@@ -1,0 +1,1 @@
+"""Evaluation on labelled clips: the paper's Table I (balanced accuracy, F-score, AUC), ROC."""
