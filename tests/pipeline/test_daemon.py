@@ -132,6 +132,11 @@ def test_daemon_on_virtual_bus_matches_the_replay(short_demo, tmp_path: Path) ->
         n_frames
     )
     assert summary.frames_out_of_order == 0
+    # the processing time of every processed frame is in the summary (and its log line)
+    assert summary.frame_ms.n == summary.frames_processed
+    assert 0.0 < summary.frame_ms.quantile(0.5) <= summary.frame_ms.quantile(0.99)
+    assert summary.frame_ms.quantile(0.99) <= summary.frame_ms.max
+    assert summary.fields()["frame_ms_max"] == round(summary.frame_ms.max, 2)
     assert summary.can_frames > 0
     assert summary.can_input_errors == 0
     assert summary.can_queue_drops == 0

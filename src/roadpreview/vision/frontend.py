@@ -2,8 +2,9 @@
 
 ``VisionFrontEnd.process(t, frame)`` prepares the frame once (grey, reduced
 image), runs the finder when there is no target or every ``redetect_s`` (to
-see cut-ins and the other vehicles to mask), tracks the lead, and tracks the
-background outside every vehicle box. A missing, black or corrupt frame gives
+see cut-ins and the other vehicles to mask; a sliced finder's run is spread
+over the next frames, see `VisionFrontEnd._finder_step`), tracks the lead, and
+tracks the background outside every vehicle box. A missing, black or corrupt frame gives
 a falsy lead observation and no correspondences, with the reason, never an
 exception; the trackers then continue from the last good frame.
 """
@@ -11,7 +12,7 @@ exception; the trackers then continue from the last good frame.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,6 +48,15 @@ class VisionConfig:
         gt=0.0,
         help="run the finder this often while tracking (cut-ins, masks); ~2 ms/frame amortised",
     )
+    finder_spread_s: float = param(
+        0.09,
+        unit="s",
+        ge=0.0,
+        le=1.0,
+        help="a sliced finder's run (motion: 3 slices of ~7 ms) is spread over the frames "
+        "due within this time of it: 3 frames at 30 fps, 2 at 15-20 fps, 1 at 10 fps "
+        "(0: all in one frame); its detections apply on the last, moved with the lead",
+    )
     detection_ttl_s: float = param(
         0.5, unit="s", gt=0.0, help="other vehicles' boxes mask the background this long"
     )
@@ -69,8 +79,11 @@ class VisionConfig:
 class FrameVision:
     """Everything the vision step saw in one frame.
 
-    ``timings_ms`` holds the duration of each part (finder, lead, background,
-    total) when the front end was given a clock, else it is empty.
+    ``detections`` are the finder's results handed to the tracker on this frame, found
+    on frame ``detected_index`` (earlier when the finder's run was spread over frames;
+    None when none were handed over); ``finder_ran``: the finder worked on this frame
+    (a whole run or a slice). ``timings_ms`` holds the duration of each part (finder,
+    lead, background, total) when the front end was given a clock, else it is empty.
     """
 
     t: float
@@ -79,6 +92,7 @@ class FrameVision:
     background: BackgroundCorrespondences
     detections: tuple[Detection, ...] = ()
     finder_ran: bool = False
+    detected_index: int | None = None
     reason: str = ""
     timings_ms: dict[str, float] = field(default_factory=dict)
 
@@ -115,12 +129,20 @@ class VisionFrontEnd:
 
     def reset(self) -> None:
         """Start a new sequence."""
+        job = getattr(self, "_job", None)
+        if job is not None:
+            job.close()
         self.finder.reset()
         self.tracker.reset()
         self.background.reset()
         self._index = 0
         self._last_find_t = -math.inf
+        self._prev_t = -math.inf
         self._others: list[tuple[float, Detection]] = []
+        self._job: Generator[None, None, list[Detection]] | None = None
+        self._job_index = 0
+        self._job_t = 0.0
+        self._job_frames_left = 0
 
     def check_frame(self, frame: Any) -> str:
         """Why ``frame`` cannot be used ('' when it can)."""
@@ -174,17 +196,13 @@ class VisionFrontEnd:
 
         # the finder: when there is no target, else every redetect_s
         t1 = clock() if clock else 0.0
-        run = not self.tracker.active or (t - self._last_find_t) >= 0.999 * self.config.redetect_s
-        detections: list[Detection] | None = None
-        if run:
-            detections = self.finder.find(frame, ctx)
-            self._last_find_t = t
-        else:
-            self.finder.observe(frame, ctx)
+        detections, detected_index, ran = self._finder_step(t, index, frame, ctx)
         t2 = clock() if clock else 0.0
-        lead = self.tracker.update(ctx, detections)
+        lead = self.tracker.update(ctx, detections, detected_index=detected_index)
         t3 = clock() if clock else 0.0
-        boxes = self._vehicle_boxes(t, detections, lead)
+        boxes = self._vehicle_boxes(
+            t, self._job_t if detections is not None else t, detections, lead
+        )
         bg = self.background.update(ctx, boxes)
         t4 = clock() if clock else 0.0
         timings = (
@@ -203,17 +221,63 @@ class VisionFrontEnd:
             lead=lead,
             background=bg,
             detections=tuple(detections or ()),
-            finder_ran=run,
+            finder_ran=ran,
+            detected_index=detected_index,
             timings_ms=timings,
         )
 
+    def _finder_step(
+        self, t: float, index: int, frame: Any, ctx: FrameContext
+    ) -> tuple[list[Detection] | None, int | None, bool]:
+        """Start, continue or finish the finder's run on this frame.
+
+        ``(detections, detected_index, ran)``: the detections completed on this frame and
+        the index of the frame they were found on (None, None when none completed), and
+        whether the finder worked. A finder with ``find_steps`` (the motion finder) has its
+        run spread over the frames due within ``finder_spread_s`` of it: the number of
+        frames is fixed when the run starts from the last frame interval, one slice per
+        frame, all that is left on the last. Which frame does what depends only on the
+        frames' time stamps, never on the time taken: replay and daemon agree.
+        """
+        cfg = self.config
+        dt = t - self._prev_t
+        self._prev_t = t
+        due = not self.tracker.active or (t - self._last_find_t) >= 0.999 * cfg.redetect_s
+        if self._job is None:
+            if not due:
+                self.finder.observe(frame, ctx)
+                return None, None, False
+            self._last_find_t = self._job_t = t
+            self._job_index = index
+            steps = getattr(self.finder, "find_steps", None)
+            frames = 1 + int(cfg.finder_spread_s / dt) if dt > 0.0 else 1
+            if steps is None or frames <= 1:
+                return self.finder.find(frame, ctx), index, True
+            self._job = steps(frame, ctx)
+            self._job_frames_left = frames
+        else:
+            self.finder.observe(frame, ctx)  # the history goes on meanwhile
+        self._job_frames_left -= 1
+        try:
+            next(self._job)
+            while self._job_frames_left <= 0:  # the last frame of the run: finish it
+                next(self._job)
+        except StopIteration as stop:
+            self._job = None
+            return list(stop.value), self._job_index, True
+        return None, None, True
+
     def _vehicle_boxes(
-        self, t: float, detections: list[Detection] | None, lead: LeadObservation
+        self,
+        t: float,
+        t_detected: float,
+        detections: list[Detection] | None,
+        lead: LeadObservation,
     ) -> list[Box]:
         """The lead's box and every recent detection (grown with age: they move)."""
         cfg = self.config
         if detections is not None:
-            self._others = [(t, d) for d in detections]
+            self._others = [(t_detected, d) for d in detections]
         self._others = [(td, d) for td, d in self._others if t - td <= cfg.detection_ttl_s]
         boxes: list[Box] = []
         for td, d in self._others:  # a handful of detections

@@ -28,7 +28,8 @@ overhang), each with its uncertainty, fused by inverse variance.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -286,6 +287,8 @@ class LeadVehicleTracker:
         self._anchor_r = (math.nan, math.nan)
         self._prev_gray = None
         self._pending = None
+        #: (frame index, track id, box) of the last frames, for `carry_forward`
+        self._boxes: deque[tuple[int, int, Box]] = deque(maxlen=8)
 
     # -- helpers ----------------------------------------------------------------------
     def horizon_v(self, pitch_rad: float = 0.0) -> float:
@@ -361,9 +364,18 @@ class LeadVehicleTracker:
 
     # -- per frame --------------------------------------------------------------------
     def update(
-        self, ctx: FrameContext, detections: list[Detection] | None = None
+        self,
+        ctx: FrameContext,
+        detections: list[Detection] | None = None,
+        *,
+        detected_index: int | None = None,
     ) -> LeadObservation:
-        """Track into this frame; acquire or switch target using ``detections`` if given."""
+        """Track into this frame; acquire or switch target using ``detections`` if given.
+
+        ``detected_index``: the frame the detections were found on when it is an earlier
+        one (a finder run spread over frames); a detection of the tracked target there is
+        moved with the target's box from that frame to this one (`carry_forward`).
+        """
         cfg = self.config
         prev = self._prev_gray
         self._prev_gray = ctx.gray
@@ -380,6 +392,8 @@ class LeadVehicleTracker:
 
         changed = False
         if detections is not None:
+            if detected_index is not None and detected_index != ctx.index:
+                detections = self.carry_forward(detections, detected_index)
             best = choose_target(
                 detections,
                 self.camera,
@@ -394,7 +408,35 @@ class LeadVehicleTracker:
             return LeadObservation.none(
                 ctx.t, lost_reason or "no lead vehicle found", track_id=self._track_id
             )
+        self._boxes.append((ctx.index, self._track_id, self._box))
         return self._observation(ctx, changed, reseeded and not changed)
+
+    def carry_forward(self, detections: list[Detection], index: int) -> list[Detection]:
+        """Detections found on the earlier frame ``index``, in the current frame: the one
+        on the tracked target then (the best IoU with its box then, at least
+        ``match_iou``) is moved and scaled as the target's box was since; the others are
+        returned as they are (their motion is unknown). Unchanged when that frame's box
+        is not known (the target was acquired since, or lost)."""
+        then = next((b for i, tid, b in self._boxes if i == index and tid == self._track_id), None)
+        if not self._active or then is None or not detections:
+            return detections
+        ious = [box_iou(d.box, then) for d in detections]
+        j = int(np.argmax(ious))
+        if ious[j] < self.config.match_iou:
+            return detections
+        now = self._box
+        sx = (now[2] - now[0]) / max(then[2] - then[0], 1e-9)
+        sy = (now[3] - now[1]) / max(then[3] - then[1], 1e-9)
+        x0, y0, x1, y1 = detections[j].box
+        box = (
+            now[0] + (x0 - then[0]) * sx,
+            now[1] + (y0 - then[1]) * sy,
+            now[0] + (x1 - then[0]) * sx,
+            now[1] + (y1 - then[1]) * sy,
+        )
+        out = list(detections)
+        out[j] = replace(detections[j], box=box)
+        return out
 
     @staticmethod
     def _lead_classes(detections: list[Detection]) -> tuple[str, ...] | None:
