@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -51,6 +52,83 @@ def test_prediction_equals_filterpy_predict_at_imu_rate() -> None:
     assert kf.kf.x[0, 0] == pytest.approx(ref.x[0, 0], abs=1e-15)
     assert kf.kf.x[1, 0] == pytest.approx(ref.x[1, 0], abs=1e-15)
     assert np.allclose(kf.kf.P[:2, :2], ref.P, rtol=1e-5, atol=1e-18)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_lean_update_equals_filterpy_update(seed: int) -> None:
+    """The Joseph update written out for the scalar relative measurement (h = e0 - e_j) gives
+    filterpy's ``KalmanFilter.update(z, R, H)``: x, P and K to 1e-12 relative, on random
+    states of the filter's size and scales, for every clone slot; P stays exactly symmetric."""
+    rng = np.random.default_rng(seed)
+    f = GyroPitchKalmanFilter()
+    n = f.kf.dim_x
+    for j in range(2, n):
+        f._bk_init(0.0)
+        scale = np.diag(10.0 ** rng.uniform(-5.0, -2.0, n))  # rad, rad/s: mixed magnitudes
+        a = rng.standard_normal((n, n))
+        P = scale @ (a @ a.T + 0.1 * np.eye(n)) @ scale
+        P = 0.5 * (P + P.T)  # exactly symmetric, as the filter keeps it
+        x = scale @ rng.standard_normal((n, 1))
+        f.kf.P[:] = P
+        f.kf.x[:] = x
+        z, R = float(rng.normal(0.0, 1e-4)), float(10.0 ** rng.uniform(-12.0, -7.0))
+
+        ref = KalmanFilter(dim_x=n, dim_z=1)
+        ref.x, ref.P = x.copy(), P.copy()
+        h = np.zeros((1, n))
+        h[0, 0], h[0, j] = 1.0, -1.0
+        ref.update(z, R=np.array([[R]]), H=h)
+
+        K = f._joseph_update(j, z - (x[0, 0] - x[j, 0]), R)
+        p_ref = 0.5 * (ref.P + ref.P.T)
+        assert np.abs(f.kf.P - p_ref).max() <= 1e-12 * np.abs(p_ref).max()
+        assert np.abs(f.kf.x - ref.x).max() <= 1e-12 * np.abs(ref.x).max()
+        assert np.abs(K - ref.K[:, 0]).max() <= 1e-12 * np.abs(ref.K).max()
+        assert np.array_equal(f.kf.P, f.kf.P.T)
+
+
+def test_arrays_assigned_to_the_filterpy_filter_are_taken_up() -> None:
+    """kf.P and kf.x are views of the filter's storage; a caller that assigns new arrays
+    (filterpy style) is noticed at the next step, with the same result as writing in place."""
+    a, b = GyroPitchKalmanFilter(), GyroPitchKalmanFilter()
+    for f in (a, b):
+        f._bk_init(0.0)
+        f._t = 0.0
+    a.kf.x[0, 0] = 0.01
+    b.kf.x = np.array(b.kf.x)
+    b.kf.x[0, 0] = 0.01
+    b.kf.P = b.kf.P.copy()
+    for f in (a, b):
+        f._bk_advance(0.1, 0.001, 1e-9, 0.1)
+        f._bk_frame(0.1)
+        f._joseph_update(2, 1e-4, 1e-10)
+    assert np.array_equal(a.kf.P, b.kf.P)
+    assert np.array_equal(a.kf.x, b.kf.x)
+    assert b.kf.x[0, 0] != 0.01
+
+
+def test_a_copied_filter_runs_on_as_the_original(kit) -> None:  # type: ignore[no-untyped-def]
+    """Deep copies and pickles keep the filter's storage and remake its views: a copy taken
+    mid-drive continues exactly as the original."""
+    import copy
+    import pickle
+
+    d = kit.synthetic(6.0, seed=2)
+    fe = kit.front_end(d)
+    f = make_fusion("kalman")
+    cut = 90
+    first = kit.replay(f, d, replace(fe, frame_t=fe.frame_t[:cut], meas=fe.meas[:cut]))
+    assert np.isfinite(first.phi).all()
+    copies = [copy.deepcopy(f), pickle.loads(pickle.dumps(f))]
+    rest = replace(fe, frame_t=fe.frame_t[cut:], meas=fe.meas[cut:], failure=fe.failure[cut:])
+    gyro_after = d.imu_t > fe.frame_t[cut - 1] + 0.1
+    runs = [
+        kit.replay(g, d, rest, imu_t=d.imu_t[gyro_after], imu_rate=d.imu_rate[gyro_after])
+        for g in (f, *copies)
+    ]
+    for r in runs[1:]:
+        assert np.array_equal(r.phi, runs[0].phi)
+        assert np.array_equal(r.std, runs[0].std)
 
 
 def test_relative_measurements_recover_the_pitch_exactly(kit) -> None:  # type: ignore[no-untyped-def]

@@ -18,6 +18,12 @@ beyond the horizon are processed tentatively for the output (the last gyro
 rate held, with growing variance) and processed again for good once the
 gyro has arrived. Back ends that can copy their state do this exactly
 (`kalman`); the others extrapolate from their last committed frame.
+
+Cost. Everything here runs once per frame or once per gyro sample, so the hot
+paths (`push_gyro`, `push_visual`, `estimate` with the frame it commits) are
+written for CPython: settings read once into attributes, the gyro's interval
+as a plain tuple (`GyroHistory.motion3`, `_bk_advance`), O(1) checks before
+any search. `roadpreview bench fusion` measures the whole streaming path.
 """
 
 from __future__ import annotations
@@ -39,6 +45,9 @@ from roadpreview.fusion.timesync import TimeOffsetEstimator
 
 log = logging.getLogger(__name__)
 
+_INF = math.inf
+_TRUSTED = VisionTrust.TRUSTED
+
 
 class StreamingFusion(ABC):
     """Base of the filter-like back ends: buffering, alignment, modes, output."""
@@ -49,6 +58,8 @@ class StreamingFusion(ABC):
 
     _last_query: float
     _last_out: FusedPitch | None
+    _level: float
+    _level_t: float
 
     def __init__(self, config: FusionConfig) -> None:
         config.validate("fusion")
@@ -57,6 +68,20 @@ class StreamingFusion(ABC):
         self.gyro = GyroHistory(config.gyro, self.events)
         self.aligner = TimeOffsetEstimator(config.alignment)
         self._q_bias = config.gyro.bias_random_walk**2
+        # settings used per frame, read once (the config is frozen)
+        g, v, mo = config.gyro, config.vision, config.modes
+        self._timeout = g.timeout_s
+        self._reorder = g.reorder_window_s
+        self._history = g.history_s
+        self._blind = g.blind_rate_std_rad_s
+        self._min_std = v.min_std_rad
+        self._low_inliers = v.low_inlier_ratio
+        self._min_inliers = v.min_inlier_ratio
+        self._max_dphi = v.max_abs_dphi_rad
+        self._capture = mo.level_capture_s
+        self._ease = mo.level_ease_s
+        self._track_add = self.aligner.track.add  # usable measurements -> the visual rate track
+        self._has_frame_done = type(self)._bk_frame_done is not StreamingFusion._bk_frame_done
         self._reset_core()
         self._bk_reset()
 
@@ -78,6 +103,8 @@ class StreamingFusion(ABC):
         yaw_rate: float | None = None,
     ) -> bool:
         """Add a gyro sample (IMU clock). Roll and yaw rates are checked, not yet used."""
+        if roll_rate is None and yaw_rate is None:
+            return self.gyro.push(t, pitch_rate)
         for name, v in (("roll_rate", roll_rate), ("yaw_rate", yaw_rate)):
             if v is not None and not math.isfinite(v):
                 self.events("nonfinite", "%s %r at t=%r is not finite: sample rejected", name, v, t)
@@ -87,7 +114,7 @@ class StreamingFusion(ABC):
     def push_visual(self, meas: VisualPitch) -> None:
         """Add a relative visual measurement (camera clock)."""
         t, t_ref = meas.t, meas.t_ref
-        if not (math.isfinite(t) and math.isfinite(t_ref)) or t_ref >= t:
+        if not -_INF < t_ref < t < _INF:  # both finite and t_ref < t (NaN fails too)
             self.events(
                 "visual-time",
                 "visual measurement with times t_ref=%r, t=%r ignored (need t_ref < t)",
@@ -95,19 +122,28 @@ class StreamingFusion(ABC):
                 t,
             )
             return
-        if self._started and t <= self._t:
+        if t <= self._t:  # (before the start _t is -inf)
             self.events(
                 "visual-late",
                 "visual measurement of frame t=%.6f arrived after the frame was committed",
                 t,
             )
             return
-        self._add_frame(t_ref)
-        self._add_frame(t)
+        if t_ref > self._t:  # (a committed key frame needs nothing)
+            self._add_frame(t_ref)
+        frames = self._frames
+        if not frames or t > frames[-1]:
+            frames.append(t)  # the usual case of `_add_frame`: the newest frame
+        else:
+            self._add_frame(t)
         good = self._is_good(meas)
-        self._vis.setdefault(t, []).append((meas, good))
+        metas = self._vis.get(t)
+        if metas is None:
+            self._vis[t] = [(meas, good)]
+        else:
+            metas.append((meas, good))
         if good:
-            self.aligner.track.add(t_ref, t, meas.dphi)
+            self._track_add(t_ref, t, meas.dphi)
 
     def push_vision_failure(self, t: float, reason: str) -> None:
         """Vision gave nothing usable for the frame at ``t`` (``reason`` for the log)."""
@@ -119,28 +155,59 @@ class StreamingFusion(ABC):
 
     def estimate(self, t: float) -> FusedPitch:
         """The fused pitch at frame time ``t`` (non-decreasing from call to call)."""
-        if not math.isfinite(t):
-            raise InputDataError(f"estimate(t): t = {t!r} is not a finite time")
-        if t < self._last_query:
-            raise InputDataError(
-                f"estimate(t): t = {t:.6f} s is before the previous query"
-                f" ({self._last_query:.6f} s); frame times must not go backwards"
-            )
-        if t == self._last_query and self._last_out is not None:
-            return self._last_out
+        if not self._last_query < t < _INF:  # the usual case passes one test
+            if not math.isfinite(t):
+                raise InputDataError(f"estimate(t): t = {t!r} is not a finite time")
+            if t < self._last_query:
+                raise InputDataError(
+                    f"estimate(t): t = {t:.6f} s is before the previous query"
+                    f" ({self._last_query:.6f} s); frame times must not go backwards"
+                )
+            if self._last_out is not None:  # the same frame again
+                return self._last_out
         self._last_query = t
-        self._add_frame(t)
+        frames = self._frames
+        if not frames or frames[-1] != t:  # (usually its visual result has added it)
+            self._add_frame(t)
         if not self._started:
-            self._start(self._frames[0])
-        self._align(t)
+            self._start(frames[0])
+        if t >= self._next_align:
+            self._align(t)
         self._commit(t)
-        self._ease_level(t, self._level_shift(self._sup))
-        if self._frames and self._frames[0] <= t:
-            phi, var, mode, shift = self._tentative(t)
+        # the level offset: decay it (time constant `ModeConfig.level_ease_s`) and take in a
+        # new shift of the key frame's estimate (`_level_shift`, inline), so that the output
+        # does not step with it
+        shift = self._bk_take_level_shift()
+        if not self._t - self._sup.reacquired_t <= self._capture:
+            shift = 0.0
+        if self._ease > 0.0:
+            level = self._level
+            if level != 0.0:
+                level *= math.exp(-(t - self._level_t) / self._ease)
+                if abs(level) < 1e-12:
+                    level = 0.0
+            self._level_t = t
+            self._level = level - shift
         else:
-            phi, var = self._bk_output()
-            mode, shift = self._sup.mode, 0.0
-        out = self._output(t, phi - shift, var, mode)
+            self._level = 0.0
+        if frames and frames[0] <= t:
+            phi, var, mode, shift = self._tentative(t)
+            phi -= shift
+            b, bvar = self._bk_bias()
+        else:
+            phi, var, b, bvar = self._bk_output_bias()
+            mode = self._sup.mode
+        # (`0.0 if x < 0.0 else x` is max(x, 0.0) without calling the builtin; NaN stays NaN)
+        out = FusedPitch(  # t, phi, std, mode, bias, time_offset, its confidence, bias_std
+            t,
+            phi + self._level,
+            math.sqrt(0.0 if var < 0.0 else var),
+            mode,
+            b,
+            self._tau,
+            self._tau_conf,
+            math.sqrt(0.0 if bvar < 0.0 else bvar),
+        )
         self._last_out = out
         return out
 
@@ -166,6 +233,11 @@ class StreamingFusion(ABC):
     def _bk_propagate(self, t: float, motion: Motion) -> None:
         """Move the current state to time ``t`` with the gyro ``motion`` over the interval."""
 
+    def _bk_advance(self, t: float, dG: float, dV: float, dM: float) -> None:
+        """`_bk_propagate` with the motion's fields as arguments (the per-frame call; a back
+        end may override it to skip building the `Motion`)."""
+        self._bk_propagate(t, Motion(dG, dV, dM))
+
     @abstractmethod
     def _bk_frame(self, t: float) -> None:
         """The current state has reached frame ``t`` (keep it for later relative measurements)."""
@@ -187,6 +259,10 @@ class StreamingFusion(ABC):
     @abstractmethod
     def _bk_bias(self) -> tuple[float, float]:
         """(bias, variance) of the gyro pitch-rate bias."""
+
+    def _bk_output_bias(self) -> tuple[float, float, float, float]:
+        """`_bk_output` and `_bk_bias` in one call (phi, variance, bias, variance)."""
+        return self._bk_output() + self._bk_bias()
 
     def _bk_take_level_shift(self) -> float:
         """How far the estimate of the current key frame has moved since the last call (the
@@ -225,7 +301,7 @@ class StreamingFusion(ABC):
         self._tau = cfg.alignment.initial_offset_s
         self._tau_std = cfg.alignment.prior_std_s
         self._tau_conf = 0.0
-        self._next_align = -math.inf
+        self._next_align = -math.inf if cfg.alignment.enabled else math.inf
         self._last_query = -math.inf
         self._last_out: FusedPitch | None = None
         # frames committed before the gyro was ready (processed again once it is)
@@ -236,15 +312,15 @@ class StreamingFusion(ABC):
         self._level_t = -math.inf
 
     def _add_frame(self, t: float) -> None:
+        """A frame time to process (finite ``t``); nothing if it is committed or known."""
+        if t <= self._t:  # at or before the committed state (before the start _t is -inf)
+            return
         frames = self._frames
         if not frames or t > frames[-1]:
-            if not self._started or t > self._t:
-                frames.append(t)
-            return
-        if self._started and t <= self._t:
+            frames.append(t)
             return
         i = bisect.bisect_left(frames, t)
-        if i == len(frames) or frames[i] != t:
+        if frames[i] != t:
             frames.insert(i, t)
 
     def _start(self, t0: float) -> None:
@@ -255,7 +331,7 @@ class StreamingFusion(ABC):
         self._bk_frame(t0)
         self._frames.pop(0)
         alive = self._alive(t0)
-        self._handle_frame_inputs(t0, self._sup, apply=True, imu_ok=alive)
+        self._handle_frame_inputs(t0, self._sup, True, alive)
         self._sup.update_mode(alive)
         self._vis.pop(t0, None)
         self._fails.pop(t0, None)
@@ -269,19 +345,23 @@ class StreamingFusion(ABC):
 
     def _alive(self, t: float) -> bool:
         """Is the IMU usable at camera time ``t`` (ready, and judged by the newest sample)?"""
-        if not self._gyro_ready(t):
+        if not (self._ready or self._gyro_ready(t)):
             return False
         newest = self.gyro.newest
-        timeout = self.config.gyro.timeout_s
         if newest is None:
-            return t - self._t0 <= timeout
-        return newest - self._tau >= t - timeout
+            return t - self._t0 <= self._timeout
+        return newest - self._tau >= t - self._timeout
 
     def _motion(self, t1: float, t2: float, alive: bool) -> Motion:
+        return Motion(*self._motion3(t1, t2, alive))
+
+    def _motion3(self, t1: float, t2: float, alive: bool) -> tuple[float, float, float]:
+        """(dG, dV, dM) over camera times [t1, t2]: the gyro, or no gyro at all."""
         if not alive:
             d = t2 - t1
-            return Motion(0.0, (self.config.gyro.blind_rate_std_rad_s * d) ** 2, 0.0)
-        return self.gyro.motion(t1 + self._tau, t2 + self._tau)
+            return 0.0, (self._blind * d) ** 2, 0.0
+        tau = self._tau
+        return self.gyro.motion3(t1 + tau, t2 + tau)
 
     def _align(self, t: float) -> None:
         cfg = self.config.alignment
@@ -306,37 +386,43 @@ class StreamingFusion(ABC):
             self._tau_std = max(est.std_s, cfg.min_std_s)
 
     def _commit(self, t: float) -> None:
-        newest = self.gyro.newest
-        gcfg = self.config.gyro
-        ready = self._gyro_ready(t)
+        gyro = self.gyro
+        newest = gyro.newest
+        tau = self._tau
+        ready = self._ready or self._gyro_ready(t)
         if not ready:
             horizon = t  # gyro not fused yet (offset unknown): nothing to wait for
         elif newest is None:
-            horizon = t if t - self._t0 > gcfg.timeout_s else self._t0
-        elif t - (newest - self._tau) > gcfg.timeout_s:
+            horizon = t if t - self._t0 > self._timeout else self._t0
+        elif t - (newest - tau) > self._timeout:
             horizon = t  # IMU lost: bridge without gyro
         else:
-            horizon = min(t, newest - self._tau - gcfg.reorder_window_s)
+            horizon = newest - tau - self._reorder
+            if not horizon < t:
+                horizon = t
         if ready and self._startup is not None:
             self._rerun_startup()
         frames = self._frames
-        n = 0
-        while n < len(frames) and frames[n] <= horizon:
-            tf = frames[n]
-            self._process_frame(tf, self._sup, apply=True)
-            n += 1
-        if n:
-            for tf in frames[:n]:
-                vis = self._vis.pop(tf, None)
-                fail = self._fails.pop(tf, None)
-                if not ready and self._startup is not None:
-                    self._startup.append((tf, vis, fail))
+        if frames and frames[0] <= horizon:
+            sup = self._sup
+            n = 0
+            while n < len(frames) and frames[n] <= horizon:
+                self._process_frame(frames[n], sup, True)
+                n += 1
+            vis, fails, startup = self._vis, self._fails, self._startup
+            for tf in frames[:n] if n > 1 else (frames[0],):
+                meas = vis.pop(tf, None)
+                fail = fails.pop(tf, None) if fails else None
+                if not ready and startup is not None:
+                    startup.append((tf, meas, fail))
             del frames[:n]
-            if self._startup is not None and self._t - self._t0 > gcfg.history_s - 1.0:
+            if startup is not None and self._t - self._t0 > self._history - 1.0:
                 self._startup = None  # too long ago: the gyro history no longer covers it
-        if ready:  # gyro up to here is spent: later samples for it are late
-            self.gyro.floor = max(self.gyro.floor, self._t + self._tau)
-        self.gyro.trim(max(self.gyro.floor, self._t + self._tau) - gcfg.history_s)
+        t_gyro = self._t + tau
+        floor = gyro.floor
+        if ready and t_gyro > floor:  # gyro up to here is spent: later samples for it are late
+            gyro.floor = floor = t_gyro
+        gyro.trim((floor if floor > t_gyro else t_gyro) - self._history)
 
     def _rerun_startup(self) -> None:
         """The offset has just become known: process the frames since the start again, now
@@ -356,7 +442,7 @@ class StreamingFusion(ABC):
                 self._vis[tf] = vis
             if fail is not None:
                 self._fails[tf] = fail
-            self._process_frame(tf, self._sup, apply=True)
+            self._process_frame(tf, self._sup, True)
             self._vis.pop(tf, None)
             self._fails.pop(tf, None)
         self._bk_take_level_shift()
@@ -370,39 +456,65 @@ class StreamingFusion(ABC):
         )
 
     def _process_frame(
-        self, tf: float, sup: ModeSupervisor, *, apply: bool
+        self, tf: float, sup: ModeSupervisor, apply: bool
     ) -> tuple[bool, list[tuple[VisualPitch, float]]]:
         """Advance to frame ``tf`` and handle its visual results (``apply``: in the back end;
-        else only decide). Returns the IMU liveness and the measurements to fuse."""
-        alive = self._alive(tf)
+        else only decide). Returns the IMU liveness and (when not ``apply``) the measurements
+        to fuse."""
+        # the IMU's liveness (`_alive`) and the motion since the state (`_motion3`), inline:
+        # this runs once per frame
+        if self._ready or self._gyro_ready(tf):
+            newest = self.gyro.newest
+            if newest is None:
+                alive = tf - self._t0 <= self._timeout
+            else:
+                alive = newest - self._tau >= tf - self._timeout
+        else:
+            alive = False
         if apply:
-            self._bk_propagate(tf, self._motion(self._t, tf, alive))
+            t1 = self._t
+            if alive:
+                tau = self._tau
+                dG, dV, dM = self.gyro.motion3(t1 + tau, tf + tau)
+                self._bk_advance(tf, dG, dV, dM)
+            else:
+                self._bk_advance(tf, 0.0, (self._blind * (tf - t1)) ** 2, 0.0)
             self._t = tf
             self._bk_frame(tf)
-        fuse = self._handle_frame_inputs(tf, sup, apply=apply, imu_ok=alive)
+        fuse = self._handle_frame_inputs(tf, sup, apply, alive)
         sup.update_mode(alive)
-        if apply:
+        if apply and self._has_frame_done:
             self._bk_frame_done(tf)
         return alive, fuse
 
     def _handle_frame_inputs(
-        self, tf: float, sup: ModeSupervisor, *, apply: bool, imu_ok: bool
+        self, tf: float, sup: ModeSupervisor, apply: bool, imu_ok: bool
     ) -> list[tuple[VisualPitch, float]]:
         """Decide per measurement of frame ``tf`` (trust, gyro check) and fuse the accepted
-        ones when ``apply``; returns them with their variances."""
+        ones when ``apply``; else return them with their variances."""
         fuse: list[tuple[VisualPitch, float]] = []
         metas = self._vis.get(tf)
         if metas:
+            gyro = self.gyro
+            use_gyro = imu_ok and gyro.newest is not None
             for m, good in metas:
                 if not good:
                     sup.bad_frame(tf)
                     continue
                 if apply:
                     self._bk_note(m)
-                var = self._meas_var(m, imu_ok)
-                checked = self.gate_with_gyro or sup.trust is not VisionTrust.TRUSTED
+                # the measurement's variance: the estimator's, inflated for few inliers, plus
+                # the part of the gyro that a time-offset error would move: (σ_τ Δω)²
+                std = m.std
+                var = (self._min_std if self._min_std > std else std) ** 2  # max(std, floor)
+                if m.inlier_ratio < self._low_inliers:
+                    var *= (self._low_inliers / m.inlier_ratio) ** 2
+                if use_gyro:
+                    tau = self._tau
+                    var += (self._tau_std * gyro.rate_change(m.t_ref + tau, m.t + tau)) ** 2
+                checked = self.gate_with_gyro or sup.trust is not _TRUSTED
                 consistent = self._consistent(m, var, imu_ok) if checked else True
-                if sup.trusted() and not consistent:  # an outlier against the gyro
+                if not consistent and sup.trust is _TRUSTED:  # an outlier against the gyro
                     if apply:
                         self.events(
                             "gated",
@@ -412,10 +524,11 @@ class StreamingFusion(ABC):
                     sup.gated(True, self.max_rejections)
                     continue
                 if sup.good_frame(tf, consistent):
-                    fuse.append((m, var))
                     if apply:
                         accepted = self._bk_visual(m, var)
                         sup.gated(not accepted, self.max_rejections)
+                    else:
+                        fuse.append((m, var))
         elif tf in self._fails:
             sup.bad_frame(tf)
         else:
@@ -426,14 +539,13 @@ class StreamingFusion(ABC):
         """Usable: the front end says so and the numbers make sense (else logged)."""
         if not m.quality_ok:
             return False
-        vcfg = self.config.vision
+        # finite and in range (NaN fails every comparison; an infinite std or ratio is caught
+        # by its bound or by the explicit test)
+        std, ratio = m.std, m.inlier_ratio
         ok = (
-            math.isfinite(m.dphi)
-            and abs(m.dphi) <= vcfg.max_abs_dphi_rad
-            and math.isfinite(m.std)
-            and m.std > 0.0
-            and math.isfinite(m.inlier_ratio)
-            and m.inlier_ratio >= vcfg.min_inlier_ratio
+            -self._max_dphi <= m.dphi <= self._max_dphi
+            and 0.0 < std < _INF
+            and self._min_inliers <= ratio < _INF
         )
         if not ok:
             self.events(
@@ -445,18 +557,6 @@ class StreamingFusion(ABC):
                 m.inlier_ratio,
             )
         return ok
-
-    def _meas_var(self, m: VisualPitch, imu_ok: bool) -> float:
-        """Variance of a measurement: the estimator's, inflated for few inliers, plus the
-        part of the gyro that a time-offset error would move: (σ_τ Δω)²."""
-        vcfg = self.config.vision
-        var = max(m.std, vcfg.min_std_rad) ** 2
-        if m.inlier_ratio < vcfg.low_inlier_ratio:
-            var *= (vcfg.low_inlier_ratio / m.inlier_ratio) ** 2
-        if imu_ok and self.gyro.newest is not None:
-            dw = self.gyro.rate_at(m.t + self._tau) - self.gyro.rate_at(m.t_ref + self._tau)
-            var += (self._tau_std * dw) ** 2
-        return var
 
     def _consistent(self, m: VisualPitch, var: float, imu_ok: bool) -> bool:
         """Re-validation: does the visual increment agree with the gyro over [t_ref, t]?"""
@@ -476,7 +576,7 @@ class StreamingFusion(ABC):
             snap = (self._bk_snapshot(), self._t, replace(self._sup))
             try:
                 for tf in frames:
-                    self._process_frame(tf, self._sup, apply=True)
+                    self._process_frame(tf, self._sup, True)
                 phi, var = self._bk_output()
                 return phi, var, self._sup.mode, self._level_shift(self._sup)
             finally:
@@ -491,7 +591,7 @@ class StreamingFusion(ABC):
         t_prev = self._t
         head: dict[float, tuple[float, float]] = {}
         for tf in frames:
-            alive, fuse = self._process_frame(tf, sup, apply=False)
+            alive, fuse = self._process_frame(tf, sup, False)
             mo = self._motion(t_prev, tf, alive)
             phi += mo.dG - b * mo.dM
             var += mo.dV + mo.dM * mo.dM * bvar
@@ -509,33 +609,4 @@ class StreamingFusion(ABC):
         """The key frame's estimate moved by the back end's shift: a level change to ease in
         shortly after a re-acquisition; otherwise the state is output as it is."""
         shift = self._bk_take_level_shift()
-        window = self.config.modes.level_capture_s
-        return shift if self._t - sup.reacquired_t <= window else 0.0
-
-    def _ease_level(self, t: float, shift: float) -> None:
-        """Decay the level offset (time constant `ModeConfig.level_ease_s`) and take in a new
-        shift of the key frame's estimate, so that the output does not step with it."""
-        tc = self.config.modes.level_ease_s
-        if tc <= 0.0:
-            self._level = 0.0
-            return
-        if self._level != 0.0:
-            self._level *= math.exp(-(t - self._level_t) / tc)
-            if abs(self._level) < 1e-12:
-                self._level = 0.0
-        self._level_t = t
-        self._level -= shift
-
-    def _output(self, t: float, phi: float, var: float, mode: FusionMode) -> FusedPitch:
-        b, bvar = self._bk_bias()
-        level = self._level
-        return FusedPitch(
-            t=t,
-            phi=phi + level,
-            std=math.sqrt(max(var, 0.0)),
-            mode=mode,
-            bias=b,
-            time_offset=self._tau,
-            time_offset_confidence=self._tau_conf,
-            bias_std=math.sqrt(max(bvar, 0.0)),
-        )
+        return shift if self._t - sup.reacquired_t <= self._capture else 0.0

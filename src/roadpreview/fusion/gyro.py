@@ -37,6 +37,7 @@ from roadpreview.fusion.config import GyroConfig
 log = logging.getLogger(__name__)
 
 _DUPLICATE_S = 1e-6  # stamps closer than this are the same sample
+_RECENT = 32  # knots searched first by the per-frame queries (frames are near the newest)
 _MAX_LOGS_PER_KIND = 20
 
 MEASURED, BRIDGED, OUTAGE, START = 0, 1, 2, 3
@@ -68,7 +69,15 @@ class RejectCounter:
 
 
 class GyroHistory:
-    """Pitch-rate samples sorted by stamp (IMU clock) with running integral, variance, time."""
+    """Pitch-rate samples sorted by stamp (IMU clock) with running integral, variance, time.
+
+    Knots are kept in two lists: the stamps (searched with `bisect`) and, per knot, the
+    tuple (G, V, M, rate, kind) — one append per list and sample, which is most of the
+    cost of a sample (`push` runs at the IMU rate).
+    """
+
+    _n_regular: int  # regular intervals counted since the period was last set
+    _sum_regular: float  # and their sum, s
 
     def __init__(self, cfg: GyroConfig, rejects: RejectCounter | None = None) -> None:
         self.cfg = cfg
@@ -77,16 +86,19 @@ class GyroHistory:
         self.reset()
 
     def reset(self) -> None:
+        #: stamp of the newest sample (None before the first)
+        self.newest: float | None = None
         self._s: list[float] = []  # knot stamps
-        self._g: list[float] = []  # running integral at the knots
-        self._v: list[float] = []  # running variance
-        self._m: list[float] = []  # running measured time
-        self._w: list[float] = []  # rate of the segment ending at the knot
-        self._kind: list[int] = []  # MEASURED / BRIDGED / OUTAGE / START
+        # per knot: running integral G, its variance V, measured time M, the rate of the
+        # segment ending at the knot, and its kind (MEASURED / BRIDGED / OUTAGE / START)
+        self._k: list[tuple[float, float, float, float, int]] = []
         self._range = self.cfg.range_rad_s
         self._set_period(1.0 / self.cfg.rate_hz)  # also counts regular intervals
         self.floor = -math.inf  #: stamps at or before this are committed: late samples
         self.n_accepted = 0
+        self._n_trimmed = 0  # knots dropped from the front so far (absolute knot numbers)
+        # numpy copies of the stamps and integral (first absolute knot, s, G), for integral_at
+        self._arrays: tuple[int, NDArray[np.float64], NDArray[np.float64]] | None = None
 
     # -- input --------------------------------------------------------------------------
     def push(self, t: float, rate: float) -> bool:
@@ -95,16 +107,15 @@ class GyroHistory:
         if s:  # the usual case first: a regular next sample (NaN and inf fail these tests)
             dt = t - s[-1]
             if _DUPLICATE_S < dt <= self._gap_limit and abs(rate) < self._range and t > self.floor:
+                k = self._k
+                g, v, m, _, _ = k[-1]
                 s.append(t)
-                self._g.append(self._g[-1] + rate * dt)
-                self._v.append(self._v[-1] + self._q * dt)
-                self._m.append(self._m[-1] + dt)
-                self._w.append(rate)
-                self._kind.append(MEASURED)
+                k.append((g + rate * dt, v + self._q * dt, m + dt, rate, MEASURED))
+                self.newest = t
                 self.n_accepted += 1
-                self._n_regular += 1
+                n = self._n_regular = self._n_regular + 1
                 self._sum_regular += dt
-                if self._n_regular == 64:
+                if n == 64:
                     self._set_period(self._sum_regular / 64.0)
                 return True
         return self._push_checked(t, rate)
@@ -154,61 +165,46 @@ class GyroHistory:
             self._knot(t - self._period, 0.0, 0.0, 0.0, 0.0, START)
             self._knot(t, w * self._period, self._q * self._period, self._period, w, MEASURED)
             return
+        g, v, m, w_last, _ = self._k[-1]
         dt = t - s[-1]
         if dt <= self._gap_limit:
-            self._knot(
-                t, self._g[-1] + w * dt, self._v[-1] + self._q * dt, self._m[-1] + dt, w, MEASURED
-            )
+            self._knot(t, g + w * dt, v + self._q * dt, m + dt, w, MEASURED)
             return
         gap = dt - self._period
         if dt <= self.cfg.timeout_s:
             self.rejects("gap", "gap of %.4f s before t=%.6f bridged", dt, t)
-            w_bridge = 0.5 * (self._w[-1] + w)
-            self._knot(
-                t - self._period,
-                self._g[-1] + w_bridge * gap,
-                self._v[-1] + (self.cfg.gap_rate_std_rad_s * gap) ** 2,
-                self._m[-1] + gap,
-                w_bridge,
-                BRIDGED,
-            )
+            w_bridge = 0.5 * (w_last + w)
+            g, v, m = g + w_bridge * gap, v + (self.cfg.gap_rate_std_rad_s * gap) ** 2, m + gap
+            self._knot(t - self._period, g, v, m, w_bridge, BRIDGED)
         else:
             self.rejects("outage", "no gyro for %.3f s before t=%.6f (IMU outage)", dt, t)
-            self._knot(
-                t - self._period,
-                self._g[-1],
-                self._v[-1] + (self.cfg.blind_rate_std_rad_s * gap) ** 2,
-                self._m[-1],
-                0.0,
-                OUTAGE,
-            )
+            v = v + (self.cfg.blind_rate_std_rad_s * gap) ** 2
+            self._knot(t - self._period, g, v, m, 0.0, OUTAGE)
         p = self._period
-        self._knot(t, self._g[-1] + w * p, self._v[-1] + self._q * p, self._m[-1] + p, w, MEASURED)
+        self._knot(t, g + w * p, v + self._q * p, m + p, w, MEASURED)
 
     def _knot(self, t: float, g: float, v: float, m: float, w: float, kind: int) -> None:
+        self.newest = t
         self._s.append(t)
-        self._g.append(g)
-        self._v.append(v)
-        self._m.append(m)
-        self._w.append(w)
-        self._kind.append(kind)
+        self._k.append((g, v, m, w, kind))
 
     def _insert(self, t: float, w: float) -> bool:
         """A sample older than the newest but not committed: sort it in and rebuild after it."""
-        s = self._s
+        s, k = self._s, self._k
         i = bisect.bisect_left(s, t)
         for j in (i - 1, i):
-            if 0 <= j < len(s) and self._kind[j] == MEASURED and abs(s[j] - t) <= _DUPLICATE_S:
+            if 0 <= j < len(s) and k[j][4] == MEASURED and abs(s[j] - t) <= _DUPLICATE_S:
                 self.rejects("duplicate", "duplicated stamp t=%.6f: rejected", t)
                 return False
         # keep the measured samples before t; re-append t and those after it in order
         j = i - 1
-        while j >= 0 and self._kind[j] != MEASURED:
+        while j >= 0 and k[j][4] != MEASURED:
             j -= 1
-        later = [(s[k], self._w[k]) for k in range(j + 1, len(s)) if self._kind[k] == MEASURED]
+        later = [(s[n], k[n][3]) for n in range(j + 1, len(s)) if k[n][4] == MEASURED]
         cut = j + 1 if j >= 0 else 0
-        for lst in (self._s, self._g, self._v, self._m, self._w, self._kind):
-            del lst[cut:]
+        del s[cut:]
+        del k[cut:]
+        self._arrays = None  # knots after the cut change
         self.rejects("reordered", "sample at t=%.6f arrived out of order: sorted in", t)
         self._append(t, w)
         for tt, ww in later:
@@ -218,60 +214,109 @@ class GyroHistory:
 
     # -- queries ------------------------------------------------------------------------
     @property
-    def newest(self) -> float | None:
-        """Stamp of the newest sample (None before the first)."""
-        return self._s[-1] if self._s else None
-
-    @property
     def period(self) -> float:
         """Current estimate of the sample period, s."""
         return self._period
 
     def _at(self, t: float) -> tuple[float, float, float]:
         """(G, V, M) at stamp ``t``; beyond the newest sample the last rate is held."""
-        s = self._s
+        s, k = self._s, self._k
         if t >= s[-1]:
             d = t - s[-1]
-            return (
-                self._g[-1] + self._w[-1] * d,
-                self._v[-1] + (self.cfg.hold_rate_std_rad_s * d) ** 2,
-                self._m[-1] + d,
-            )
+            g, v, m, w, _ = k[-1]
+            return g + w * d, v + (self.cfg.hold_rate_std_rad_s * d) ** 2, m + d
         if t <= s[0]:
-            return self._g[0], self._v[0], self._m[0]
+            return k[0][:3]
         i = bisect.bisect_right(s, t)
         a = (t - s[i - 1]) / (s[i] - s[i - 1])
-        return (
-            self._g[i - 1] + a * (self._g[i] - self._g[i - 1]),
-            self._v[i - 1] + a * (self._v[i] - self._v[i - 1]),
-            self._m[i - 1] + a * (self._m[i] - self._m[i - 1]),
-        )
+        g0, v0, m0, _, _ = k[i - 1]
+        g1, v1, m1, _, _ = k[i]
+        return g0 + a * (g1 - g0), v0 + a * (v1 - v0), m0 + a * (m1 - m0)
 
     def motion(self, s1: float, s2: float) -> Motion:
         """Integral, variance and measured time of the gyro over stamps [s1, s2]."""
-        if not self._s:
+        return Motion(*self.motion3(s1, s2))
+
+    def motion3(self, s1: float, s2: float) -> tuple[float, float, float]:
+        """`motion` as a plain (dG, dV, dM) tuple: the per-frame call of the back ends."""
+        s = self._s
+        if not s:
             d = max(s2 - s1, 0.0)
-            return Motion(0.0, (self.cfg.hold_rate_std_rad_s * d) ** 2, 0.0)
+            return 0.0, (self.cfg.hold_rate_std_rad_s * d) ** 2, 0.0
+        if s[0] < s1 <= s2 < s[-1]:  # the usual case: both inside the buffer (as `_at`)
+            k = self._k
+            # a frame interval is at the recent end: search the last knots when they hold it
+            lo = len(s) - _RECENT
+            if lo <= 0 or s[lo] > s1:
+                lo = 0
+            i = bisect.bisect_right(s, s1, lo)
+            a = (s1 - s[i - 1]) / (s[i] - s[i - 1])
+            g0, v0, m0, _, _ = k[i - 1]
+            g1, v1, m1, _, _ = k[i]
+            ga, va, ma = g0 + a * (g1 - g0), v0 + a * (v1 - v0), m0 + a * (m1 - m0)
+            i = bisect.bisect_right(s, s2, i)
+            a = (s2 - s[i - 1]) / (s[i] - s[i - 1])
+            g0, v0, m0, _, _ = k[i - 1]
+            g1, v1, m1, _, _ = k[i]
+            gb, vb, mb = g0 + a * (g1 - g0), v0 + a * (v1 - v0), m0 + a * (m1 - m0)
+            dv = vb - va
+            return gb - ga, 0.0 if dv < 0.0 else dv, mb - ma  # max(dv, 0.0)
         g1, v1, m1 = self._at(s1)
         g2, v2, m2 = self._at(s2)
-        if s1 > self._s[-1]:  # both extrapolated: the variance of the second part only
+        if s1 > s[-1]:  # both extrapolated: the variance of the second part only
             d = s2 - s1
             v1, v2 = 0.0, (self.cfg.hold_rate_std_rad_s * d) ** 2
-        return Motion(g2 - g1, max(v2 - v1, 0.0), m2 - m1)
+        return g2 - g1, max(v2 - v1, 0.0), m2 - m1
 
     def rate_at(self, t: float) -> float:
         """The measured rate of the sample covering stamp ``t`` (the newest beyond the end)."""
         s = self._s
         if not s:
             return 0.0
-        i = min(bisect.bisect_left(s, t), len(s) - 1)
-        return self._w[i]
+        i = bisect.bisect_left(s, t)
+        return self._k[i][3] if i < len(s) else self._k[-1][3]
+
+    def rate_change(self, s1: float, s2: float) -> float:
+        """``rate_at(s2) - rate_at(s1)``."""
+        s = self._s
+        if not s:
+            return 0.0
+        k, n = self._k, len(s)
+        lo = n - _RECENT
+        if lo <= 0 or s[lo] >= s2:
+            lo = 0
+        i = bisect.bisect_left(s, s2, lo)
+        j = bisect.bisect_left(s, s1)
+        return (k[i][3] if i < n else k[-1][3]) - (k[j][3] if j < n else k[-1][3])
 
     def integral_at(self, t: NDArray[np.float64], since: float) -> NDArray[np.float64]:
         """G at stamps ``t`` (vectorised), using knots from ``since`` on (for the alignment)."""
         s = self._s
         i0 = max(bisect.bisect_left(s, since) - 1, 0)
-        return np.interp(t, np.asarray(s[i0:]), np.asarray(self._g[i0:]))
+        sa, ga = self._knot_arrays()
+        return np.interp(t, sa[i0:], ga[i0:])
+
+    def _knot_arrays(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The knot stamps and integral as numpy arrays, extended by the knots appended since
+        the last call (converting the whole buffer each time cost 0.2 ms per alignment)."""
+        s, k = self._s, self._k
+        first = self._n_trimmed
+        c = self._arrays
+        if c is not None and c[0] + c[1].size > first:
+            c_first, sa, ga = c
+            drop = first - c_first  # knots trimmed since
+            new = c_first + sa.size - first  # knots already converted
+            if new < len(s):
+                sa = np.concatenate((sa[drop:], np.array(s[new:])))
+                g_new = np.fromiter((kn[0] for kn in k[new:]), np.float64, len(s) - new)
+                ga = np.concatenate((ga[drop:], g_new))
+            else:
+                sa, ga = sa[drop:], ga[drop:]
+        else:
+            sa = np.array(s, dtype=np.float64)
+            ga = np.fromiter((kn[0] for kn in k), np.float64, len(k))
+        self._arrays = (first, sa, ga)
+        return sa, ga
 
     def covers(self, t: float) -> bool:
         """True when the buffer holds stamp ``t``: not older than its oldest knot and a real
@@ -280,7 +325,9 @@ class GyroHistory:
 
     def trim(self, before: float) -> None:
         """Forget knots older than stamp ``before`` (keeping one knot before it)."""
-        i = bisect.bisect_left(self._s, before) - 1
-        if i > 256:  # amortised: drop in blocks
-            for lst in (self._s, self._g, self._v, self._m, self._w, self._kind):
-                del lst[:i]
+        s = self._s
+        if len(s) > 257 and s[257] < before:  # amortised: drop in blocks of more than 256
+            i = bisect.bisect_left(s, before) - 1
+            del s[:i]
+            del self._k[:i]
+            self._n_trimmed += i
