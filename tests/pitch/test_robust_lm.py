@@ -218,3 +218,18 @@ def test_registry_builds_by_name_and_rejects_unknown_names_and_options() -> None
         make_estimator("robust", CAM, cauchy_scale=1.0)
     with pytest.raises(ConfigError, match="cauchy_scale_px"):
         make_estimator("robust", CAM, cauchy_scale_px=-1.0)
+
+
+@pytest.mark.parametrize("n", [200, 1000, 2000])
+def test_essential_matrix_reports_a_calibrated_std(n: int) -> None:
+    # OpenCV gives no uncertainty; without a std the visual-only fusion rejects every
+    # essential-matrix measurement and the baseline silently becomes "uncompensated".
+    # The std must describe the actual error: RMS of error / std near 1 (within 2x)
+    est = EssentialMatrixPitchEstimator(CAM)
+    results = [(est.estimate(sc.x_ref, sc.x_cur), sc.phi) for sc in _scenes(n, 30, seed=n + 7)]
+    stds = np.array([r.std for r, _ in results])
+    errs = np.array([r.phi - phi for r, phi in results])
+    assert np.all(np.isfinite(stds))
+    assert np.all(stds > 0)
+    z = np.sqrt(np.mean((errs / stds) ** 2))
+    assert 0.5 < z < 2.0
