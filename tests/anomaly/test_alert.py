@@ -12,6 +12,7 @@ from roadpreview.anomaly import (
     AlertBuilder,
     AlertConfig,
     AnomalyEvent,
+    DetectorConfig,
     Side,
     SignalModel,
     SuppressionReason,
@@ -44,13 +45,14 @@ def _event(**changes: Any) -> AnomalyEvent:
 def test_a_bump_of_known_height_at_known_distance(make_trajectory: Any) -> None:
     """The lead rises by δ = 6 cm at d = 20 m, f = 1000 px: a step of f δ / d = 3 px.
 
-    s peaks at half the step (1.5 px), so α = 0.5 (the calibration of a step)
-    recovers δ exactly; α = 1 gives half of it.
+    With the paper's s (eq. 1, ``detrend=False``) s peaks at half the step (1.5 px), so
+    α = 0.5 (the calibration of a step) recovers δ exactly; α = 1 gives half of it.
     """
     f, delta, d, v = 1000.0, 0.06, 20.0, 10.0
     t = np.arange(180) / 30.0
     y = np.where(t >= 2.0, 380.0 - f * delta / d, 380.0)
-    run = WindowedStdDetector().run(make_trajectory(t, y, distance_m=d, speed_mps=v))
+    det = WindowedStdDetector(DetectorConfig(detrend=False))
+    run = det.run(make_trajectory(t, y, distance_m=d, speed_mps=v))
     [event] = run.alerts
     alert = AlertBuilder(signal=SignalModel(focal_px=f, alpha=0.5)).build(event)
     assert alert is not None

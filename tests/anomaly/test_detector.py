@@ -24,6 +24,9 @@ from roadpreview.configtools import load, save
 from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.fusion.mode import FusionMode
 
+#: the paper's s (eq. 1): the plain std of the window, no detrending
+PAPER = DetectorConfig(detrend=False)
+
 
 def _step_s(a_px: float, n_window: int, c: int) -> float:
     """std (ddof 0) of a window of n samples, c of them at a_px and the rest at 0."""
@@ -46,7 +49,7 @@ def test_step_gives_the_analytic_s_curve_and_one_event(
     t = np.arange(int(6 * fps)) / fps
     k0 = int(2 * fps)  # the step happens at frame k0 (t = 2 s)
     y = np.where(np.arange(len(t)) >= k0, 400.0 - a_px, 400.0)  # the lead rises: v decreases
-    run = WindowedStdDetector().run(make_trajectory(t, y))
+    run = WindowedStdDetector(PAPER).run(make_trajectory(t, y))
     for c in range(1, n_window):
         assert run.s[k0 + c - 1] == pytest.approx(_step_s(a_px, n_window, c), rel=1e-9)
     s_max = a_px / 2 if n_window % 2 == 0 else a_px * math.sqrt((n_window**2 - 1) / 4) / n_window
@@ -67,7 +70,7 @@ def test_rectangular_pulse_gives_a_plateau_and_one_event(make_trajectory: Any) -
     t = np.arange(180) / fps
     y = np.full(len(t), 250.0)
     y[60 : 60 + w] -= a_px
-    run = WindowedStdDetector().run(make_trajectory(t, y))
+    run = WindowedStdDetector(PAPER).run(make_trajectory(t, y))
     plateau = run.s[60 + w - 1 : 60 + 30]
     assert len(plateau) == 30 - w + 1
     np.testing.assert_allclose(plateau, a_px * math.sqrt(w * (30 - w)) / 30, rtol=1e-12)
@@ -174,7 +177,7 @@ def test_hard_braking_lead_is_suppressed_visibly_and_does_not_hide_a_later_bump(
     y = np.full(len(t), 300.0)
     y[t >= 10.4] += 8.0  # the dive moves the lead's rear down by 8 px
     y[t >= 12.2] -= 3.0  # then a real bump lifts it (a 3 px step)
-    cfg = DetectorConfig(nms_window_s=3.0)
+    cfg = replace(PAPER, nms_window_s=3.0)  # steps: the paper's s (detrending halves them)
     run = WindowedStdDetector(cfg).run(make_trajectory(t, y, lead_accel=accel))
     suppressed = [e for e in run.events if e.suppressed]
     real = run.alerts
@@ -250,7 +253,7 @@ def test_invalid_frames_are_left_out_and_gaps_restart_the_window(make_trajectory
     valid[100:105] = False  # a lost track for 5 frames
     keep = (t < 6.0) | (t >= 7.5)  # 1.5 s of frames never arrive
     samples = [s for s, k in zip(make_trajectory(t, y, valid=valid), keep, strict=True) if k]
-    run = WindowedStdDetector().run(samples)
+    run = WindowedStdDetector(PAPER).run(samples)
     tt = run.t
     k = int(np.searchsorted(tt, t[110]))
     window = (t > t[110] - 1.0 + 1e-6) & (t <= t[110]) & valid
@@ -270,7 +273,7 @@ def test_times_must_increase() -> None:
 
 
 def test_frame_output_is_available_every_frame(make_trajectory: Any) -> None:
-    det = WindowedStdDetector()
+    det = WindowedStdDetector(PAPER)
     assert det.frame is None
     t = np.arange(60) / 30.0
     for s in make_trajectory(t, 300.0 + np.sin(t)):

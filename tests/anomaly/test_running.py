@@ -32,7 +32,7 @@ def test_one_hour_at_30_fps_equals_numpy_std_and_raises_no_event() -> None:
     y = 400.0 + 30.0 * np.sin(2 * np.pi * t / 600.0) + rng.normal(0.0, 0.4, n)
     left = y + rng.normal(0.0, 0.2, n)
     right = y + rng.normal(0.0, 0.2, n)
-    det = WindowedStdDetector(DetectorConfig())
+    det = WindowedStdDetector(DetectorConfig(detrend=False))  # the paper's s: plain std
     run = det.run(
         TrajectorySample(t=float(a), y_c=float(b), y_c_left=float(c), y_c_right=float(d))
         for a, b, c, d in zip(t, y, left, right, strict=True)

@@ -42,6 +42,9 @@ class SuppressionReason(IntFlag):
     LEAD_ACCEL = 1
     #: the fusion is DEGRADED: the trajectory is not compensated for the ego pitch
     DEGRADED = 2
+    #: the fusion is IMU_ONLY before it has been FUSED long enough to know the gyro bias:
+    #: the integrated pitch drifts
+    SETTLING = 4
 
 
 @dataclass(frozen=True, slots=True)
@@ -64,6 +67,9 @@ class TrajectorySample:
     lead_accel_mps2: float | None = None  #: lead's longitudinal acceleration, m/s² (+ forward)
     ego_speed_mps: float | None = None  #: ego speed over ground from CAN, m/s
     valid: bool = True  #: False when the lead position of this frame is unusable
+    #: the correction subtracted from y to get y_c (f tan φ + the heave term), px; NaN if
+    #: unknown. Its windowed spread says how hard the compensation is working
+    compensation_px: float = math.nan
 
 
 @dataclass(frozen=True, slots=True)

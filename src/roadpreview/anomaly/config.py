@@ -21,22 +21,28 @@ FALSE_POSITIVE_RATE = 1e-6
 
 
 def noise_threshold_px(
-    noise_std_px: float, window_samples: int, false_positive_rate: float
+    noise_std_px: float,
+    window_samples: int,
+    false_positive_rate: float,
+    *,
+    detrended: bool = False,
 ) -> float:
     """Threshold on s that white Gaussian noise of ``noise_std_px`` exceeds with the given rate.
 
     s is the population standard deviation (ddof = 0) of N = ``window_samples``
-    samples; for white noise N s²/σ² follows χ² with N - 1 degrees of freedom, so
-    ``P(s > thr) = false_positive_rate`` at ``thr = σ sqrt(χ²_{N-1}(1 - p) / N)``.
+    samples; for white noise N s²/σ² follows χ² with N - 1 degrees of freedom
+    (N - 2 when s is taken around the window's least-squares line, ``detrended``),
+    so ``P(s > thr) = false_positive_rate`` at ``thr = σ sqrt(χ²_dof(1 - p) / N)``.
     The rate is per frame (neighbouring frames share samples, so exceedances
     come in clusters).
     """
-    if noise_std_px <= 0 or window_samples < 2 or not 0 < false_positive_rate < 1:
+    dof = window_samples - (2 if detrended else 1)
+    if noise_std_px <= 0 or dof < 1 or not 0 < false_positive_rate < 1:
         raise ConfigError(
             f"noise_threshold_px({noise_std_px}, {window_samples}, {false_positive_rate}):"
-            " need noise > 0 px, at least 2 samples and 0 < rate < 1"
+            " need noise > 0 px, more samples than fitted parameters and 0 < rate < 1"
         )
-    q = float(chi2.isf(false_positive_rate, window_samples - 1))
+    q = float(chi2.isf(false_positive_rate, dof))
     return noise_std_px * math.sqrt(q / window_samples)
 
 
@@ -101,6 +107,13 @@ class DetectorConfig:
         help="noise floor 0.4 px gives 0.65 px at 1e-6 false positives per frame"
         " (noise_threshold_px), plus a margin for slow trends; see docs/detector.md",
     )
+    detrend: bool = param(
+        True,
+        help="s is the std of y_c around its least-squares line over the window instead of"
+        " around its mean: slow ramps (a gap that closes, long road waves, a drifting pitch)"
+        " do not count, a bump's up-and-down does (it is nearly orthogonal to a line through"
+        " the window's centre). false: the paper's eq. 1. A step's s drops from A/2 to A/4",
+    )
     threshold_mode: str = param(
         "pixel",
         choices=("pixel", "distance"),
@@ -137,6 +150,25 @@ class DetectorConfig:
         le=20,
         help="suppress above this lead acceleration: its body pitch (~1 deg per g) moves the"
         " rear ~7 mm at 2 m/s^2, the threshold's size at short gaps",
+    )
+    compensation_error_fraction: float = param(
+        0.1,
+        unit="",
+        ge=0,
+        le=1,
+        help="the ego-motion compensation is good to about this fraction of its own windowed"
+        " spread: the threshold becomes sqrt(threshold² + (fraction * s_comp)²), s_comp the"
+        " std of the compensation over the window. A few ms of IMU-camera misalignment at"
+        " the 1-2 Hz of the ego crossing a bump is 5-10 % (2π f δt); 0 disables",
+    )
+    imu_only_settle_s: float = param(
+        10.0,
+        unit="s",
+        ge=0,
+        le=600,
+        help="IMU_ONLY frames are suppressed (SETTLING) until the fusion has been FUSED this"
+        " long in total: the gyro bias is learnt only while vision and gyro are fused, and an"
+        " unsettled bias of a phone gyro (0.1-0.3 deg/s) drifts 1-4 px per second",
     )
     suppress_hold_s: float = param(
         0.5,

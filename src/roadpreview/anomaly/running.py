@@ -12,6 +12,13 @@ moments skip it, the others use it. The samples live in numpy ring buffers
 (window inspection and recomputation are vectorised); the running state is
 three floats per channel.
 
+With ``trend=True`` each channel also keeps the mean and M2 of the sample
+times and the co-moment of time and value (the same updates, three more
+floats), so that `detrended_std_values` gives the spread around the
+least-squares line through the window, still O(1) per sample. Times enter
+relative to the first sample's time, so that hours of Unix time stamps do
+not eat the precision.
+
 Window membership is by time: at time t the window holds the samples with
 ``t - t_i < window_s - time_tol_s``. At a steady rate r that is the last
 ``round(window_s * r)`` samples (30 at 30 fps for 1 s); ``time_tol_s``
@@ -52,6 +59,7 @@ class WindowedMoments:
         recompute_every: int = 1000,
         time_tol_s: float = TIME_TOL_S,
         capacity: int = 64,
+        trend: bool = False,
     ) -> None:
         if not window_s > 0 or channels < 1 or recompute_every < 1 or capacity < 1:
             raise ConfigError(
@@ -72,6 +80,12 @@ class WindowedMoments:
         self._n = [0] * channels
         self._mean = [0.0] * channels
         self._m2 = [0.0] * channels
+        # with trend: per channel the mean and M2 of the times and the time-value co-moment
+        self.trend = trend
+        self._t0 = math.nan  # time origin of the trend sums
+        self._mt = [0.0] * channels
+        self._m2t = [0.0] * channels
+        self._c = [0.0] * channels
         self._since_recompute = 0
         self.recomputations = 0  #: how often the moments were recomputed exactly
 
@@ -124,24 +138,37 @@ class WindowedMoments:
 
     def _remove_oldest(self) -> None:
         x = self._x[self._head].tolist()
+        tau = float(self._t[self._head]) - self._t0
         self._head = (self._head + 1) % len(self._t)
         self._size -= 1
         n, mean, m2 = self._n, self._mean, self._m2
+        trend = self.trend
+        mt, m2t, cc = self._mt, self._m2t, self._c
         for c, v in enumerate(x):
             if v != v:  # NaN: this channel had no sample here
                 continue
             n1 = n[c] - 1
             if n1 == 0:
                 n[c], mean[c], m2[c] = 0, 0.0, 0.0
+                mt[c], m2t[c], cc[c] = 0.0, 0.0, 0.0
                 continue
             m0 = mean[c]
             m1 = m0 - (v - m0) / n1
             m2[c] -= (v - m0) * (v - m1)
             mean[c] = m1
             n[c] = n1
+            if trend:  # the inverse of the co-moment update in _add
+                t0 = mt[c]
+                t1 = t0 - (tau - t0) / n1
+                m2t[c] -= (tau - t0) * (tau - t1)
+                cc[c] -= (tau - t1) * (v - m0)
+                mt[c] = t1
 
-    def _add(self, x: list[float]) -> None:
+    def _add(self, x: list[float], t: float) -> None:
         n, mean, m2 = self._n, self._mean, self._m2
+        trend = self.trend
+        mt, m2t, cc = self._mt, self._m2t, self._c
+        tau = t - self._t0
         for c, v in enumerate(x):
             if v != v:
                 continue
@@ -151,10 +178,16 @@ class WindowedMoments:
             m2[c] += (v - m0) * (v - m1)
             mean[c] = m1
             n[c] = n1
+            if trend:  # Welford's co-moment: C += (t - mean_t_old) (v - mean_new)
+                d = tau - mt[c]
+                t1 = mt[c] + d / n1
+                m2t[c] += d * (tau - t1)
+                cc[c] += d * (v - m1)
+                mt[c] = t1
 
     def recompute(self) -> None:
         """Recompute count, mean and M2 exactly (two-pass) from the window's samples."""
-        _, x, _ = self.window()
+        t, x, _ = self.window()
         valid = ~np.isnan(x)
         n = valid.sum(axis=0)
         mean = np.where(valid, x, 0.0).sum(axis=0) / np.maximum(n, 1)
@@ -162,6 +195,15 @@ class WindowedMoments:
         self._n = [int(v) for v in n]
         self._mean = np.where(n > 0, mean, 0.0).tolist()
         self._m2 = (dev * dev).sum(axis=0).tolist()
+        if self.trend:
+            if self._size:  # a fresh time origin
+                self._t0 = float(t[0])
+            tau = np.where(valid, (t - self._t0)[:, None], 0.0)
+            mt = tau.sum(axis=0) / np.maximum(n, 1)
+            tdev = np.where(valid, tau - mt, 0.0)
+            self._mt = np.where(n > 0, mt, 0.0).tolist()
+            self._m2t = (tdev * tdev).sum(axis=0).tolist()
+            self._c = (tdev * dev).sum(axis=0).tolist()
         self._since_recompute = 0
         self.recomputations += 1
 
@@ -183,7 +225,9 @@ class WindowedMoments:
         if aux is not None:
             self._aux[i] = aux
         self._size += 1
-        self._add(self._x[i].tolist())
+        if self._t0 != self._t0:  # NaN: the first sample sets the time origin
+            self._t0 = t
+        self._add(self._x[i].tolist(), t)
         self._since_recompute += 1
         if self._since_recompute >= self.recompute_every or min(self._m2) < 0.0:
             self.recompute()
@@ -202,6 +246,20 @@ class WindowedMoments:
             math.sqrt(max(m2, 0.0) / n) if n else math.nan
             for n, m2 in zip(self._n, self._m2, strict=True)
         ]
+
+    def detrended_std_values(self) -> list[float]:
+        """Population std (ddof = 0) of each channel's residuals from its least-squares line
+        in time over the window; NaN where no sample. Needs ``trend=True``."""
+        if not self.trend:
+            raise ConfigError("WindowedMoments: detrended_std_values needs trend=True")
+        out = []
+        for n, m2, m2t, c in zip(self._n, self._m2, self._m2t, self._c, strict=True):
+            if not n:
+                out.append(math.nan)
+                continue
+            explained = c * c / m2t if m2t > 0.0 else 0.0
+            out.append(math.sqrt(max(m2 - explained, 0.0) / n))
+        return out
 
     def counts(self) -> list[int]:
         """Valid samples per channel, as a list."""

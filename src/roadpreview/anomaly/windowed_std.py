@@ -2,11 +2,15 @@
 
 `WindowedStdDetector` takes one `TrajectorySample` per camera frame and keeps
 s(t) for the whole lead and for its left and right halves as running
-moments (`WindowedMoments`, one vector of three channels). A frame's s is
-compared with the threshold (the paper's pixel threshold, or optionally one
-that follows the distance, ``docs/detector.md``); peaks above it go through
+moments (`WindowedMoments`, one vector of three channels, plus a fourth for
+the compensation applied). By default s is taken around the window's
+least-squares line (``detrend``; the paper's plain std with ``detrend =
+false``). A frame's s is compared with the threshold (the paper's pixel
+threshold, or optionally one that follows the distance, raised while the
+compensation swings, ``docs/detector.md``); peaks above it go through
 non-maximum suppression (`PeakPicker`), so one bump gives one event. Frames
-during and after a hard acceleration of the lead or DEGRADED fusion are
+during and after a hard acceleration of the lead, DEGRADED fusion or an
+IMU_ONLY fusion whose gyro bias has not settled are
 *suppressed*: their peaks come out as events with a ``suppressed`` reason,
 through a separate NMS so that they cannot hide a real bump next to them.
 """
@@ -79,15 +83,16 @@ class WindowedStdDetector:
         self.config = config or DetectorConfig()
         check_ranges(self.config, "DetectorConfig")
         self.config.validate()
-        self._moments = WindowedMoments(
-            self.config.window_s, 3, aux_columns=4, recompute_every=self.config.recompute_every
-        )
+        self._moments = self._new_moments()
         self._nms: PeakPicker[AnomalyEvent] = PeakPicker(self.config.nms_window_s)
         self._nms_suppressed: PeakPicker[AnomalyEvent] = PeakPicker(self.config.nms_window_s)
         self._last_cause_t = {
             SuppressionReason.LEAD_ACCEL: -math.inf,
             SuppressionReason.DEGRADED: -math.inf,
+            SuppressionReason.SETTLING: -math.inf,
         }
+        self._fused_s = 0.0  # time the fusion has been FUSED so far (kept over restarts)
+        self._fused_t = math.nan  # time of the last FUSED sample
         self._frame: DetectorFrame | None = None
         self._t_last = -math.inf
 
@@ -98,15 +103,31 @@ class WindowedStdDetector:
 
     @property
     def moments(self) -> WindowedMoments:
-        """The running moments (channels: whole lead, left half, right half)."""
+        """The running moments (channels: whole lead, left half, right half, the
+        compensation applied)."""
         return self._moments
 
-    def threshold_px(self, distance_m: float) -> float:
-        """The threshold at a lead distance (NaN distance: the pixel threshold)."""
+    def _new_moments(self) -> WindowedMoments:
+        # channels: whole lead, left half, right half, the compensation applied
+        return WindowedMoments(
+            self.config.window_s,
+            4,
+            aux_columns=4,
+            recompute_every=self.config.recompute_every,
+            trend=self.config.detrend,
+        )
+
+    def threshold_px(self, distance_m: float, s_comp_px: float = math.nan) -> float:
+        """The threshold at a lead distance (NaN distance: the pixel threshold), raised in
+        quadrature by ``compensation_error_fraction`` times the windowed std of the
+        compensation (NaN: not raised)."""
         cfg = self.config
+        thr = cfg.threshold_px
         if cfg.threshold_mode == "distance" and math.isfinite(distance_m) and distance_m > 0:
-            return max(cfg.threshold_px, cfg.signal.s_px(cfg.min_height_m, distance_m))
-        return cfg.threshold_px
+            thr = max(thr, cfg.signal.s_px(cfg.min_height_m, distance_m))
+        if cfg.compensation_error_fraction > 0 and math.isfinite(s_comp_px):
+            thr = math.hypot(thr, cfg.compensation_error_fraction * s_comp_px)
+        return thr
 
     def _suppression(self, t: float, sample: TrajectorySample) -> SuppressionReason:
         cfg = self.config
@@ -115,6 +136,15 @@ class WindowedStdDetector:
             self._last_cause_t[SuppressionReason.LEAD_ACCEL] = t
         if sample.mode == FusionMode.DEGRADED:
             self._last_cause_t[SuppressionReason.DEGRADED] = t
+        if sample.mode == FusionMode.FUSED:
+            if math.isfinite(self._fused_t):
+                # a frame interval, or at most one window across a gap
+                self._fused_s += min(t - self._fused_t, cfg.window_s)
+            self._fused_t = t
+        else:
+            self._fused_t = math.nan
+            if sample.mode == FusionMode.IMU_ONLY and self._fused_s < cfg.imu_only_settle_s:
+                self._last_cause_t[SuppressionReason.SETTLING] = t
         # a cause taints every window that still holds its samples, plus the settling time
         span = cfg.window_s + cfg.suppress_hold_s
         reason = SuppressionReason.NONE
@@ -124,14 +154,14 @@ class WindowedStdDetector:
         return reason
 
     def _s_values(self, t: float) -> tuple[list[float], int]:
-        """s of the three channels (NaN where undefined) and the whole-lead sample count."""
+        """s of the four channels (NaN where undefined) and the whole-lead sample count."""
         cfg = self.config
         m = self._moments
         counts = m.counts()
         need = max(cfg.min_samples, math.ceil(cfg.min_valid_fraction * m.size))
         if t - m.oldest_t < cfg.min_span_fraction * cfg.window_s - m.time_tol_s:
-            return [math.nan] * 3, counts[0]
-        s = m.std_values()
+            return [math.nan] * 4, counts[0]
+        s = m.detrended_std_values() if cfg.detrend else m.std_values()
         return [v if n >= need else math.nan for v, n in zip(s, counts, strict=True)], counts[0]
 
     def _describe_peak(
@@ -184,6 +214,8 @@ class WindowedStdDetector:
             x = [float(v) if math.isfinite(v) else math.nan for v in x]
         else:
             x = [math.nan] * 3
+        comp = float(sample.compensation_px)
+        x.append(comp if math.isfinite(comp) else math.nan)
         speed = sample.ego_speed_mps
         aux = [
             sample.lead_distance_m,
@@ -193,7 +225,7 @@ class WindowedStdDetector:
         ]
         self._moments.push(t, x, aux)
         s, n = self._s_values(t)
-        threshold = self.threshold_px(sample.lead_distance_m)
+        threshold = self.threshold_px(sample.lead_distance_m, s[3])
         suppressed = self._suppression(t, sample)
         self._frame = DetectorFrame(
             t=t,
@@ -218,9 +250,7 @@ class WindowedStdDetector:
         """A new target (the tracker switched vehicles): confirm pending peaks and start an
         empty window, so that the jump between two vehicles' trajectories is not a bump."""
         events = self.flush()
-        self._moments = WindowedMoments(
-            self.config.window_s, 3, aux_columns=4, recompute_every=self.config.recompute_every
-        )
+        self._moments = self._new_moments()
         self._nms = PeakPicker(self.config.nms_window_s)
         self._nms_suppressed = PeakPicker(self.config.nms_window_s)
         return events

@@ -146,7 +146,7 @@ class StatusEncoder(_ProtectedEncoder):
 
         return {
             "StatusFusionMode": int(status.mode),
-            "StatusSuppression": int(status.suppressed) & 0b11,
+            "StatusSuppression": int(status.suppressed) & 0b111,
             "StatusPitch": self._fit("StatusPitch", scaled(status.pitch_rad, 1 / _DEG)),
             "StatusGyroBias": self._fit("StatusGyroBias", scaled(status.gyro_bias_rad_s, 1 / _DEG)),
             "StatusTextureQuality": self._fit(

@@ -2,7 +2,7 @@
 
 Generates the simulator's ``demo`` drive (or reuses it when present and
 identical), replays it through the default pipeline (motion lead finder,
-robust pitch, Kalman fusion), and prints the anomalies detected against the
+robust pitch, Kalman fusion, heave compensation), and prints the anomalies detected against the
 truth, the fusion mode changes (the fog stretch shows IMU_ONLY and the
 recovery), where the outputs were written, and the speed.
 """
@@ -51,7 +51,9 @@ def _run(args: argparse.Namespace) -> int:
         print(f"  {info.n_frames} frames, {info.n_can_frames} CAN frames in {info.seconds:.1f} s")
     inputs = ReplayInputs.from_recording(rec_dir)
     out = args.out / "replay"
-    print("replaying it through the default pipeline (motion finder, robust pitch, kalman) ...")
+    print(
+        "replaying it through the default pipeline (motion finder, robust pitch, kalman, heave) ..."
+    )
     result = replay(inputs, None, out, progress=print_progress)
     print("\n\nanomalies the lead crossed, against the truth:")
     assert result.match is not None

@@ -1,4 +1,5 @@
-"""Paper eq. (4): the lead vehicle's image row corrected for the ego camera's pitch."""
+"""Paper eq. (4): the lead vehicle's image row corrected for the ego camera's pitch, and
+our extension for the camera's heave (``docs/method.md``, "Heave")."""
 
 from __future__ import annotations
 
@@ -10,7 +11,26 @@ from numpy.typing import ArrayLike, NDArray
 from roadpreview.errors import InputDataError
 
 
-def compensation(y: ArrayLike, phi: ArrayLike, f: float) -> NDArray[np.float64]:
+def heave_term_px(heave_m: ArrayLike, distance_m: ArrayLike, f: float) -> NDArray[np.float64]:
+    """f Δz / d: how far a camera that rose by ``heave_m`` (m, up +) moves a target at
+    ``distance_m`` (m) down in the image (px, v down). 0 where either is unknown (NaN) or
+    the distance is not positive: no heave term is applied there."""
+    h = np.asarray(heave_m, dtype=np.float64)
+    d = np.asarray(distance_m, dtype=np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ok = np.isfinite(h) & np.isfinite(d) & (d > 0)
+        out: NDArray[np.float64] = np.where(ok, float(f) * h / np.where(ok, d, 1.0), 0.0)
+    return out
+
+
+def compensation(
+    y: ArrayLike,
+    phi: ArrayLike,
+    f: float,
+    *,
+    heave_m: ArrayLike | None = None,
+    distance_m: ArrayLike | None = None,
+) -> NDArray[np.float64]:
     """y_c = y - f tan(phi)  (paper eq. 4), element-wise with numpy broadcasting.
 
     ``y`` is the lead's vertical image position (px, v down), ``phi`` the
@@ -20,6 +40,11 @@ def compensation(y: ArrayLike, phi: ArrayLike, f: float) -> NDArray[np.float64]:
     leaves the lead's own motion. NaN in ``y`` or ``phi`` (no lead, no pitch)
     stays NaN. Raises `InputDataError` for a focal length that is not a positive
     finite number or a pitch at or beyond ±90 degrees.
+
+    With ``heave_m`` (the camera's vertical displacement Δz, m, up +, e.g. from
+    `roadpreview.fusion.heave.HeaveObserver`) and ``distance_m`` (the lead's distance d)
+    the camera's heave is removed too: ``y_c = y - f tan(phi) - f Δz / d``. Where Δz
+    or d is unknown (NaN) no heave term is applied (`heave_term_px`).
     """
     if not (isinstance(f, (int, float, np.floating)) and math.isfinite(f) and f > 0):
         raise InputDataError(f"compensation: focal length f = {f!r} px must be positive")
@@ -29,4 +54,6 @@ def compensation(y: ArrayLike, phi: ArrayLike, f: float) -> NDArray[np.float64]:
         if np.any(np.abs(pp) >= 0.5 * math.pi):
             raise InputDataError("compensation: |phi| must be below pi/2 rad (a pitch, not a turn)")
     out: NDArray[np.float64] = yy - float(f) * np.tan(pp)
+    if heave_m is not None and distance_m is not None:
+        out = out - heave_term_px(heave_m, distance_m, float(f))
     return out

@@ -16,6 +16,7 @@ from typing import Any
 from roadpreview import configtools
 from roadpreview.anomaly.config import AnomalyConfig
 from roadpreview.configtools import param
+from roadpreview.fusion.heave import HeaveConfig
 from roadpreview.vision.frontend import VisionConfig
 
 
@@ -125,6 +126,7 @@ class PipelineConfig:
     vision: VisionConfig = field(default_factory=VisionConfig)
     pitch: PitchStageConfig = field(default_factory=PitchStageConfig)
     fusion: FusionStageConfig = field(default_factory=FusionStageConfig)
+    heave: HeaveConfig = field(default_factory=HeaveConfig)
     anomaly: AnomalyConfig = field(default_factory=AnomalyConfig)
     can: CanStageConfig = field(default_factory=CanStageConfig)
     lead: LeadKinematicsConfig = field(default_factory=LeadKinematicsConfig)

@@ -9,7 +9,9 @@ Per frame (``push_frame``):
    pitch since the key frame; warm start reset when the key frame is renewed);
 3. fusion: the visual measurement (or a vision failure) with the gyro samples
    pushed so far -> φ(t), its std, the mode, the gyro bias, the time offset;
-4. compensation ``y_c = y - f tan φ`` (paper eq. 4), also for the halves;
+4. compensation ``y_c = y - f tan φ - f Δz_cam / d`` (paper eq. 4 plus the camera's heave
+   Δz_cam from the accelerometer, `roadpreview.fusion.heave`, over the lead's distance d;
+   no heave term while either is unknown), also for the halves;
 5. detector: s(t) (paper eq. 1), threshold, NMS -> events -> alerts.
 """
 
@@ -34,6 +36,7 @@ from roadpreview.canbus.mapping import load_mapping
 from roadpreview.canbus.output import Status
 from roadpreview.canbus.samples import ImuSample, SpeedSample
 from roadpreview.fusion import FusedPitch, VisualPitch, compensation, make_fusion
+from roadpreview.fusion.heave import HeaveObserver, HeaveTerm
 from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pitch import make_estimator
@@ -73,6 +76,13 @@ class FrameResult:
     target_changed: bool
     lead_accel_mps2: float | None
     ego_speed_mps: float | None
+    #: the camera's heave Δz_cam (m, up +) at the frame; NaN: unavailable (no accelerometer,
+    #: warming up after a gap, or heave compensation disabled)
+    heave_m: float = math.nan
+    #: the heave term subtracted from y (px): f (Δz_cam - Δz_on) / d plus the value it had
+    #: when it resumed (Δz_on), so it never jumps; held constant while the heave or the
+    #: lead distance is unknown; 0 before the first and after a target change
+    heave_px: float = 0.0
     events: tuple[AnomalyEvent, ...] = ()
     alerts: tuple[Alert, ...] = ()
 
@@ -100,6 +110,8 @@ class FrameResult:
         "n_background",
         "textured",
         "n_events",
+        "heave_m",
+        "heave_px",
     )
 
     def row(self) -> list[Any]:
@@ -127,6 +139,8 @@ class FrameResult:
             self.n_background,
             int(self.textured),
             len(self.events),
+            self.heave_m,
+            self.heave_px,
         ]
 
 
@@ -202,6 +216,9 @@ class Pipeline:
         for quantity, why in self.can_decoder.missing.items():
             log.warning("CAN input: %s is not available (%s)", quantity, why)
         self._lead = _LeadKinematics(cfg.lead.window_s)
+        on = cfg.heave.enabled
+        self.heave = HeaveObserver(cfg.heave) if on else None
+        self._heave_term = HeaveTerm(cfg.heave, camera.fy) if on else None
         self._speed = _Speed()
         self._key_index = -1
         self._phi = 0.0
@@ -220,6 +237,8 @@ class Pipeline:
                 self.push_speed(sample)
 
     def push_imu(self, sample: ImuSample) -> None:
+        if self.heave is not None:
+            self.heave.push(sample)
         roll, pitch, yaw = sample.rates_rad_s
         if math.isfinite(pitch):
             self.fusion.push_gyro(
@@ -281,8 +300,9 @@ class Pipeline:
 
         lead = fv.lead
         f = self.camera.fy
+        heave_m, heave_px = self._heave(t, fused, lead.distance_m, lead.target_changed)
         y_c, y_c_l, y_c_r = (
-            float(compensation(v, phi, f)) if math.isfinite(v) else math.nan
+            float(compensation(v, phi, f)) - heave_px if math.isfinite(v) else math.nan
             for v in (lead.y, lead.y_left, lead.y_right)
         )
         ego_speed = self._speed.v if math.isfinite(self._speed.v) else None
@@ -300,6 +320,7 @@ class Pipeline:
             lead_accel_mps2=lead_accel,
             ego_speed_mps=ego_speed,
             valid=bool(lead) and math.isfinite(y_c),
+            compensation_px=f * math.tan(phi) + heave_px,
         )
         events = self.detector.restart() if lead.target_changed else []
         events += self.detector.push(sample)
@@ -335,12 +356,27 @@ class Pipeline:
             target_changed=lead.target_changed,
             lead_accel_mps2=lead_accel,
             ego_speed_mps=ego_speed,
+            heave_m=heave_m,
+            heave_px=heave_px,
             events=tuple(events),
             alerts=alerts,
         )
         self.frames += 1
         self.last = result
         return result
+
+    def _heave(
+        self, t: float, fused: FusedPitch, distance_m: float, target_changed: bool
+    ) -> tuple[float, float]:
+        """The camera's heave at frame ``t`` (m, NaN if unavailable) and the heave term
+        subtracted from y (px, `HeaveTerm`: held while unknown, never jumping). The IMU
+        is queried on its own clock: frame time + the fusion's time offset."""
+        if self.heave is None or self._heave_term is None:
+            return math.nan, 0.0
+        self.heave.set_pitch(self._phi)
+        offset = fused.time_offset if math.isfinite(fused.time_offset) else 0.0
+        est = self.heave.at(t + offset)
+        return est.dz_m, self._heave_term.update(t, est, distance_m, target_changed)
 
     def finish(self) -> list[Alert]:
         """End of input: alerts for events still held by the non-maximum suppression."""
