@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "replay": "roadpreview.cli.replay",
     "run": "roadpreview.cli.run",
     "bench": "roadpreview.cli.bench",
+    "evaluate": "roadpreview.cli.evaluate",
 }
 
 

@@ -5,8 +5,12 @@ Each positive clip is centred on the apex time (the lead's front axle over the
 anomaly) with ``clip_half_s`` of context on either side; a background clip is
 centred on a time at least ``clearance_s`` away from any crossing of the lead.
 The ``hard`` flag is the paper's: the ego crosses another anomaly while the
-lead crosses this one. Drives are generated in parallel processes and are
-deterministic by seed; the index is ``dataset.json``.
+lead crosses this one. Optionally (the evaluation) a background clip is hard
+too when the ego crosses an anomaly inside a given window around its centre,
+and a share of the background clips is centred on the ego's own crossings
+(the ego pitching with no lead event: what compensation is for). Drives are
+generated in parallel processes and are deterministic by seed; the index is
+``dataset.json``.
 """
 
 from __future__ import annotations
@@ -93,8 +97,24 @@ def clips_of_recording(
     clip_half_s: float = 5.0,
     clearance_s: float = 1.5,
     background_per_positive: float = 1.0,
+    hard_window_s: tuple[float, float] | None = None,
+    ego_crossing_share: float = 0.0,
+    clear_of_hits_only: bool = False,
+    background_spacing_s: float | None = None,
 ) -> list[Clip]:
-    """Positive clips for each anomaly the lead crosses, and background clips."""
+    """Positive clips for each anomaly the lead crosses, and background clips.
+
+    ``hard_window_s = (lo, hi)``: a background clip centred at t is ``hard`` when
+    the ego's front axle crosses an anomaly it hits within [t + lo, t + hi] (by
+    default background clips are never hard). ``ego_crossing_share``: that share
+    of the background clips is centred on the ego's crossings (``kind`` =
+    ``"ego-crossing"``) at least ``clearance_s`` from any crossing of the lead,
+    the rest drawn at random as before (0: the random draw alone, unchanged).
+    ``clear_of_hits_only``: background clips keep ``clearance_s`` only from the
+    anomalies the lead hits (one it passes beside does not move it); by default
+    from every anomaly the lead passes. ``background_spacing_s``: the least time
+    between two background clips (default twice ``clearance_s``).
+    """
     info = json.loads((folder / "truth.json").read_text())
     duration = float(info["duration_s"])
     lo, hi = clip_half_s, duration - clip_half_s
@@ -104,7 +124,8 @@ def clips_of_recording(
         t = e.get("lead_front_t_s")
         if t is None:
             continue
-        crossings.append(float(t))
+        if e["lead_hits"] or not clear_of_hits_only:
+            crossings.append(float(t))
         if e["lead_hits"] and lo <= t <= hi:
             clips.append(
                 Clip(
@@ -123,17 +144,47 @@ def clips_of_recording(
             )
     n_pos = sum(c.label for c in clips)
     n_bg = round(background_per_positive * max(n_pos, 1))
-    candidates = rng.uniform(lo, hi, 50 * n_bg) if hi > lo else np.empty(0)
+    spacing = 2.0 * clearance_s if background_spacing_s is None else background_spacing_s
     cross = np.asarray(crossings)
+    ego_cross = np.asarray(
+        [
+            float(e["ego_front_t_s"])
+            for e in info["events"]
+            if e.get("ego_hits") and e.get("ego_front_t_s") is not None
+        ]
+    )
+    chosen: list[float] = []
+    from_ego: set[float] = set()
+    n_ego = min(n_bg, round(ego_crossing_share * n_bg)) if ego_crossing_share > 0 else 0
+    if n_ego:
+        ego_ok = ego_cross[(ego_cross >= lo) & (ego_cross <= hi)]
+        if cross.size and ego_ok.size:
+            far = np.min(np.abs(ego_ok[:, None] - cross[None, :]), axis=1) >= clearance_s
+            ego_ok = ego_ok[far]
+        for t in rng.permutation(ego_ok):
+            if all(abs(t - c) >= spacing for c in chosen):
+                chosen.append(float(t))
+                from_ego.add(float(t))
+            if len(chosen) == n_ego:
+                break
+    candidates = rng.uniform(lo, hi, 50 * n_bg) if hi > lo else np.empty(0)
     if cross.size:
         far = np.min(np.abs(candidates[:, None] - cross[None, :]), axis=1) >= clearance_s
         candidates = candidates[far]
-    chosen: list[float] = []
-    for t in candidates:  # a few dozen candidates; keep background clips apart
-        if all(abs(t - c) >= 2.0 * clearance_s for c in chosen):
-            chosen.append(float(t))
-        if len(chosen) == n_bg:
-            break
+    if len(chosen) < n_bg:
+        for t in candidates:  # a few dozen candidates; keep background clips apart
+            if all(abs(t - c) >= spacing for c in chosen):
+                chosen.append(float(t))
+            if len(chosen) == n_bg:
+                break
+
+    def ego_crosses_near(t: float) -> bool:
+        if hard_window_s is None or not ego_cross.size:
+            return False
+        return bool(
+            np.any((ego_cross >= t + hard_window_s[0]) & (ego_cross <= t + hard_window_s[1]))
+        )
+
     clips += [
         Clip(
             recording=name,
@@ -141,6 +192,8 @@ def clips_of_recording(
             t_start_s=t - clip_half_s,
             t_end_s=t + clip_half_s,
             label=0,
+            hard=ego_crosses_near(t),
+            kind="ego-crossing" if t in from_ego else "",
         )
         for t in sorted(chosen)
     ]

@@ -1,0 +1,774 @@
+"""The experiments: the paper's Fig. 4-7 and Table I, then ours (texture loss, range,
+lead time). Each function takes the processed data, returns plain data (JSON-ready)
+and writes its figure.
+
+* `e1_signal_vs_distance` (Fig. 4): s at the bump crossings of the ``controlled``
+  drives vs the lead distance, the fit s(d) = α f δ / d + β, the separation distance.
+* `e2_ego_bump` (Fig. 5): pitch of each method vs the truth and y_c while the ego
+  crosses a bump.
+* `e3_fpr_vs_rotation` (Fig. 6): false-positive rate of background windows vs the
+  ego's rotation intensity.
+* `e4_table1` (Table I, Fig. 7): cross-validated balanced accuracy and F-score, AUC,
+  entire / hard / easy, and ROC curves.
+* `e5_beyond` : texture loss, detection range per resolution, alert lead time.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import zlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from roadpreview.eval.clips import (
+    DETECTOR_WINDOW_S,
+    ClipTable,
+    background_windows,
+    clip_scores,
+    draw_clips,
+    mean_abs_rate,
+    score_table,
+    window_max,
+)
+from roadpreview.eval.cv import ENTIRE, cross_validate
+from roadpreview.eval.methods import METHODS, MethodSpec
+from roadpreview.eval.metrics import auc, best_f_threshold, confusion, roc_curve
+from roadpreview.eval.plan import EvalPlan, gap_name
+from roadpreview.eval.runner import MethodSet, RecordingJob, Trace, load_traces
+
+Array = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+#: truth arrays the experiments read
+_TRUTH_KEYS = (
+    "frame_t_s",
+    "cam_pitch_rad",
+    "cam_pitch_rate_rad_s",
+    "lead_distance_m",
+    "lead_box_px",
+)
+
+
+# -- data access --------------------------------------------------------------------------------
+@dataclass
+class EvalData:
+    """Processed recordings: traces, truth and clips, loaded once."""
+
+    plan: EvalPlan
+    methods: MethodSet
+    jobs: dict[str, list[RecordingJob]]
+    _traces: dict[str, dict[str, Trace]] = field(default_factory=dict)
+    _truth: dict[str, dict[str, Array]] = field(default_factory=dict)
+    _info: dict[str, dict[str, Any]] = field(default_factory=dict)
+    _tables: dict[str, ClipTable] = field(default_factory=dict)
+
+    @property
+    def method_names(self) -> list[str]:
+        return list(self.methods.configs)
+
+    def spec(self, method: str) -> MethodSpec:
+        return METHODS[method]
+
+    def traces(self, job: RecordingJob) -> dict[str, Trace]:
+        if job.key not in self._traces:
+            self._traces[job.key] = load_traces(job, self.methods)
+        return self._traces[job.key]
+
+    def truth(self, job: RecordingJob) -> dict[str, Array]:
+        if job.key not in self._truth:
+            with np.load(job.folder / "truth.npz") as npz:
+                self._truth[job.key] = {k: np.asarray(npz[k]) for k in _TRUTH_KEYS}
+        return self._truth[job.key]
+
+    def info(self, job: RecordingJob) -> dict[str, Any]:
+        if job.key not in self._info:
+            self._info[job.key] = json.loads((job.folder / "truth.json").read_text())
+        return self._info[job.key]
+
+    def focal_px(self, job: RecordingJob) -> float:
+        return float(job.scenario.camera_model().fy)
+
+    def clip_table(self, dataset: str, jobs: Sequence[RecordingJob] | None = None) -> ClipTable:
+        """Clips of a data set (or of the given jobs) with every method's score."""
+        jobs = list(jobs if jobs is not None else self.jobs[dataset])
+        key = dataset + "|" + ",".join(j.key for j in jobs)
+        if key not in self._tables:
+            plan = self.plan
+            clips = {
+                j.key: draw_clips(
+                    j.folder,
+                    j.key,
+                    (plan.seed, i, zlib.crc32(dataset.encode())),
+                    window=plan.score_window_s,
+                    clip_half_s=plan.clip_half_s,
+                    clearance_s=plan.clearance_s,
+                    ego_crossing_share=plan.ego_crossing_share,
+                    clear_of_hits_only=plan.clear_of_hits_only,
+                    background_spacing_s=plan.background_spacing_s,
+                )
+                for i, j in enumerate(jobs)
+            }
+            self._tables[key] = score_table(
+                clips,
+                {j.key: self.traces(j) for j in jobs},
+                {j.key: self.truth(j) for j in jobs},
+                plan.score_window_s,
+            )
+        return self._tables[key]
+
+
+def _f(x: Any) -> float | None:
+    """A JSON-ready float (None for NaN / inf)."""
+    v = float(x)
+    return v if math.isfinite(v) else None
+
+
+def _plt() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig: Any, path: Path) -> str:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    _plt().close(fig)
+    return path.name
+
+
+def _crossings(info: Mapping[str, Any], who: str, hits_only: bool = True) -> list[float]:
+    """Front-axle crossing times of ``who`` ("lead" or "ego")."""
+    out = []
+    for e in info["events"]:
+        t = e.get(f"{who}_front_t_s")
+        if t is not None and (e.get(f"{who}_hits") or not hits_only):
+            out.append(float(t))
+    return out
+
+
+def _hp_error(t: Array, err: Array, window_s: float = DETECTOR_WINDOW_S) -> Array:
+    """err minus its trailing mean over ``window_s``: the part of a pitch error that the
+    1 s detector window sees (a constant offset cancels in s)."""
+    n = max(2, round(window_s / float(np.median(np.diff(t)))))
+    ok = np.isfinite(err)
+    e = np.where(ok, err, 0.0)
+    c = np.concatenate([[0.0], np.cumsum(e)])
+    k = np.concatenate([[0], np.cumsum(ok)])
+    idx = np.arange(err.size)
+    lo = np.maximum(idx + 1 - n, 0)
+    cnt = k[idx + 1] - k[lo]
+    mean = (c[idx + 1] - c[lo]) / np.maximum(cnt, 1)
+    out = err - mean
+    out[(idx < n - 1) | ~ok] = math.nan
+    return np.asarray(out, dtype=np.float64)
+
+
+def _rms(x: Array) -> float:
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x**2))) if x.size else math.nan
+
+
+# -- E1: signal vs distance (Fig. 4) ------------------------------------------------------------
+def e1_signal_vs_distance(data: EvalData, fig_dir: Path) -> dict[str, Any]:
+    """s at the lead's bump crossings vs distance; fit s(d) = α f δ / d + β; the largest
+    distance where the crossings still stand out of the background's 99th percentile."""
+    plan = data.plan
+    jobs = data.jobs["controlled"]
+    per_method: dict[str, dict[str, Any]] = {}
+    for m in data.method_names:
+        pos_d, pos_s, pos_x, pos_gap = [], [], [], []
+        bg_by_gap: dict[float, Array] = {}
+        for job in jobs:
+            gap = float(job.scenario.motion.gap_m)
+            info, tr = data.info(job), data.traces(job)[m]
+            f = data.focal_px(job)
+            lead = [
+                e
+                for e in info["events"]
+                if e.get("lead_hits") and e.get("lead_front_t_s") is not None
+            ]
+            for e in lead:
+                tc = float(e["lead_front_t_s"])
+                if tc + plan.score_window_s[0] - DETECTOR_WINDOW_S < plan.e1_start_s:
+                    continue  # the detector window would reach into the start-up
+                s_c, _ = window_max(tr.t, tr.s, tc, plan.score_window_s)
+                d = float(e["lead_distance_m"])
+                pos_d.append(d)
+                pos_s.append(s_c)
+                pos_x.append(f * float(e["height_m"]) / d)
+                pos_gap.append(gap)
+            cross = np.asarray(_crossings(info, "lead") + _crossings(info, "ego"))
+            t = tr.t
+            keep = (t >= plan.e1_start_s) & np.isfinite(tr.s)
+            if cross.size:
+                near = (t[:, None] >= cross[None, :] + plan.e1_exclude_s[0]) & (
+                    t[:, None] <= cross[None, :] + plan.e1_exclude_s[1]
+                )
+                keep &= ~near.any(axis=1)
+            bg_by_gap[gap] = tr.s[keep]
+        x = np.asarray(pos_x)
+        s = np.asarray(pos_s)
+        alpha = beta = r2 = math.nan
+        if x.size >= 2:
+            A = np.column_stack([x, np.ones_like(x)])
+            (alpha, beta), *_ = np.linalg.lstsq(A, s, rcond=None)
+            ss_res = float(np.sum((s - (alpha * x + beta)) ** 2))
+            ss_tot = float(np.sum((s - s.mean()) ** 2))
+            r2 = 1.0 - ss_res / ss_tot if ss_tot > 0 else math.nan
+        bg_all = np.concatenate(list(bg_by_gap.values())) if bg_by_gap else np.empty(0)
+        p99_all = float(np.percentile(bg_all, 99)) if bg_all.size else math.nan
+        gaps = sorted(bg_by_gap)
+        rows = []
+        separated_to = math.nan
+        broken = False
+        for g in gaps:
+            sel = np.asarray(pos_gap) == g
+            bg = bg_by_gap[g]
+            p99 = float(np.percentile(bg, 99)) if bg.size >= 30 else p99_all
+            s_g = s[sel]
+            d_g = np.asarray(pos_d)[sel]
+            sep = bool(s_g.size and np.median(s_g) > p99)
+            if sep and not broken:
+                separated_to = float(np.median(d_g))
+            elif s_g.size:
+                broken = True
+            rows.append(
+                {
+                    "gap_m": g,
+                    "distance_m": _f(np.median(d_g)) if d_g.size else None,
+                    "positive_s": [_f(v) for v in s_g],
+                    "background_p99": _f(p99),
+                    "background_median": _f(np.median(bg)) if bg.size else None,
+                    "background_frames": int(bg.size),
+                    "separated": sep,
+                }
+            )
+        per_method[m] = {
+            "alpha": _f(alpha),
+            "beta": _f(beta),
+            "r2": _f(r2),
+            "n_points": int(x.size),
+            "background_p99_pooled": _f(p99_all),
+            "separation_distance_m": _f(separated_to),
+            "per_gap": rows,
+            "points": {"d": [_f(v) for v in pos_d], "s": [_f(v) for v in s]},
+        }
+    fig_name = _plot_e1(data, per_method, fig_dir / "e1_signal_vs_distance.png")
+    f0 = data.focal_px(jobs[0]) if jobs else math.nan
+    return {
+        "focal_px": _f(f0),
+        "size": list(plan.e1_size),
+        "delta_m": 0.06,
+        "methods": per_method,
+        "figure": fig_name,
+    }
+
+
+def _plot_e1(data: EvalData, res: Mapping[str, Any], path: Path) -> str:
+    plt = _plt()
+    methods = list(res)
+    cols = 3
+    rows = math.ceil(len(methods) / cols)
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(4.2 * cols, 3.4 * rows), squeeze=False, layout="constrained"
+    )
+    f = data.focal_px(data.jobs["controlled"][0])
+    for ax, m in zip(axes.ravel(), methods, strict=False):
+        r = res[m]
+        d = np.asarray([v for v in r["points"]["d"]], dtype=float)
+        s = np.asarray([v if v is not None else np.nan for v in r["points"]["s"]], dtype=float)
+        ax.plot(d, s, "o", color=data.spec(m).color, label="crossings")
+        g = [row["distance_m"] for row in r["per_gap"] if row["distance_m"] is not None]
+        p99 = [row["background_p99"] for row in r["per_gap"] if row["distance_m"] is not None]
+        ax.plot(g, p99, "k--", lw=1, label="background p99")
+        if r["alpha"] is not None and d.size:
+            dd = np.linspace(max(d.min() * 0.8, 1.0), d.max() * 1.1, 100)
+            ax.plot(
+                dd,
+                r["alpha"] * f * 0.06 / dd + r["beta"],
+                "-",
+                color="0.3",
+                lw=1,
+                label=f"α={r['alpha']:.2f} β={r['beta']:.2f} R²={r['r2'] or 0:.2f}",
+            )
+        ax.set_title(data.spec(m).label, fontsize=9)
+        ax.set_xlabel("lead distance (m)")
+        ax.set_ylabel("s (px)")
+        ax.legend(fontsize=7)
+    for ax in axes.ravel()[len(methods) :]:
+        ax.axis("off")
+    fig.suptitle("E1: s at the lead's bump crossings vs distance (controlled)")
+    return _save(fig, path)
+
+
+# -- E2: the ego over a bump (Fig. 5) -----------------------------------------------------------
+def e2_ego_bump(data: EvalData, fig_dir: Path) -> dict[str, Any]:
+    """Pitch of each method vs the truth, and y_c, around the ego's first bump crossing
+    on the ``controlled`` drive at ``e2_gap_m``.
+
+    Alignment: the pipeline's pitch is relative to its first frame; each method's
+    curve is shifted by its mean difference to the truth over the first second of
+    the plotted window (2 s before the ego's crossing). y_c is shown relative to its
+    mean over the same second."""
+    plan = data.plan
+    job = next(j for j in data.jobs["controlled"] if j.name == gap_name(plan.e2_gap_m))
+    info, truth, traces = data.info(job), data.truth(job), data.traces(job)
+    ego = sorted(_crossings(info, "ego"))
+    te = next((t for t in ego if t >= 2.5), ego[0] if ego else 5.0)
+    lo, hi = te - 2.0, te + 3.0
+    tt = truth["frame_t_s"]
+    phi_true = truth["cam_pitch_rad"]
+    out: dict[str, Any] = {"recording": job.key, "ego_crossing_s": te, "window_s": [lo, hi]}
+    rows = {}
+    curves = {}
+    for m, tr in traces.items():
+        t = tr.t
+        sel = (t >= lo) & (t <= hi)
+        ref = (t >= lo) & (t < lo + 1.0)
+        true_i = np.interp(t, tt, phi_true)
+        err = tr["phi"] - true_i
+        offset = float(np.nanmean(err[ref])) if np.isfinite(err[ref]).any() else 0.0
+        e_win = err[sel] - offset
+        hp = _hp_error(t, err)
+        yc = tr["y_c"]
+        yc0 = float(np.nanmean(yc[ref])) if np.isfinite(yc[ref]).any() else 0.0
+        rows[m] = {
+            "rms_error_window_deg": _f(np.degrees(_rms(e_win))),
+            "max_abs_error_window_deg": _f(np.degrees(np.nanmax(np.abs(e_win))))
+            if np.isfinite(e_win).any()
+            else None,
+            "rms_error_hp_drive_deg": _f(np.degrees(_rms(hp))),
+            "s_max_window_px": _f(np.nanmax(tr.s[sel])) if np.isfinite(tr.s[sel]).any() else None,
+        }
+        curves[m] = (t[sel], tr["phi"][sel] - offset, yc[sel] - yc0)
+    out["methods"] = rows
+    plt = _plt()
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
+    sel_t = (tt >= lo) & (tt <= hi)
+    a1.plot(tt[sel_t] - te, np.degrees(phi_true[sel_t]), "k-", lw=2.2, label="truth")
+    for m, (t, phi, yc) in curves.items():
+        spec = data.spec(m)
+        if spec.compensated:
+            a1.plot(t - te, np.degrees(phi), color=spec.color, lw=1.2, label=spec.label)
+        a2.plot(t - te, yc, color=spec.color, lw=1.2, label=spec.label)
+    a1.axvline(0, color="0.6", lw=0.8)
+    a2.axvline(0, color="0.6", lw=0.8)
+    a1.set_ylabel("camera pitch (deg)")
+    a1.legend(fontsize=7, ncol=2)
+    a2.set_ylabel("y_c - mean of first s (px)")
+    a2.set_xlabel("time from the ego's front axle over the bump (s)")
+    a2.legend(fontsize=7, ncol=2)
+    fig.suptitle(f"E2: the ego crosses a 6 cm bump (controlled, gap {plan.e2_gap_m:g} m)")
+    out["figure"] = _save(fig, fig_dir / "e2_ego_bump.png")
+    return out
+
+
+# -- E4: Table I and ROC (Fig. 7) ---------------------------------------------------------------
+def e4_table1(data: EvalData, fig_dir: Path) -> dict[str, Any]:
+    """5-fold cross-validated BA and F-score at the F-maximising threshold (chosen on the
+    training folds), AUC; entire / hard / easy subsets of the wild set; ROC curves."""
+    plan = data.plan
+    table = data.clip_table("wild")
+    labels, hard = table.labels, table.hard
+    tracked = table.masks["tracked"]
+    subsets = {
+        "hard": hard,
+        "easy": ~hard,
+        "tracked": tracked,
+        "tracked-hard": tracked & hard,
+        "tracked-easy": tracked & ~hard,
+    }
+    res: dict[str, Any] = {}
+    rocs: dict[str, dict[str, tuple[Array, Array]]] = {}
+    for m in data.method_names:
+        scores = table.scores[m]
+        cv = cross_validate(
+            scores,
+            labels,
+            subsets=subsets,
+            groups=table.groups,
+            k=plan.cv_k,
+            seed=plan.cv_seed,
+        )
+        fold_thr = [fr.threshold for fr in cv[ENTIRE].folds]
+        thr_all = best_f_threshold(scores, labels)
+        c_default = confusion(scores, labels, 1.0)
+        c_best = confusion(scores, labels, thr_all)
+        res[m] = {
+            "subsets": {
+                name: {
+                    "n_pos": r.n_pos,
+                    "n_neg": r.n_neg,
+                    "ba_mean": _f(r.balanced_accuracy_mean),
+                    "ba_std": _f(r.balanced_accuracy_std),
+                    "f_mean": _f(r.f_score_mean),
+                    "f_std": _f(r.f_score_std),
+                    "auc": _f(r.auc),
+                    "auc_mean": _f(r.auc_mean),
+                    "auc_std": _f(r.auc_std),
+                }
+                for name, r in cv.items()
+            },
+            "fold_thresholds_px": [_f(v) for v in fold_thr],
+            "threshold_f_max_px": _f(thr_all),
+            "at_f_max": {"tpr": _f(c_best.tpr), "fpr": _f(c_best.fpr), "f": _f(c_best.f_score)},
+            "at_1px": {
+                "tpr": _f(c_default.tpr),
+                "fpr": _f(c_default.fpr),
+                "f": _f(c_default.f_score),
+            },
+            "no_lead_clips": int((~table.has_lead[m]).sum()),
+        }
+        rocs[m] = {}
+        for name, mask in (("entire", np.ones_like(labels)), ("hard", hard)):
+            if labels[mask].any() and (~labels[mask]).any():
+                fpr, tpr, _ = roc_curve(scores[mask], labels[mask])
+                rocs[m][name] = (fpr, tpr)
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.6))
+    for ax, name in zip(axes, ("entire", "hard"), strict=True):
+        for m, curves in rocs.items():
+            if name in curves:
+                spec = data.spec(m)
+                a = res[m]["subsets"][name]["auc"]
+                ax.plot(*curves[name], color=spec.color, label=f"{spec.label} ({a:.2f})")
+        ax.plot([0, 1], [0, 1], ":", color="0.6")
+        ax.set_title(f"{name} subset")
+        ax.set_xlabel("false-positive rate")
+        ax.set_ylabel("true-positive rate")
+        ax.legend(fontsize=7, loc="lower right")
+    fig.suptitle("E4: ROC of the clip score max s(t) (wild set)")
+    # positives whose ego crosses the same anomaly inside the score window: there the
+    # ego's own pitching adds to the uncompensated score of a true event
+    events = {
+        (j.key, int(e["index"])): e for j in data.jobs["wild"] for e in data.info(j)["events"]
+    }
+    same = 0
+    for c in table.clips:
+        if c.label and c.event_index is not None:
+            e = events[(c.recording, c.event_index)]
+            te = e.get("ego_front_t_s")
+            if e.get("ego_hits") and te is not None:
+                same += int(float(te) - c.t_center_s <= plan.score_window_s[1])
+    return {
+        "counts": {**table.counts(), "ego_same_anomaly_in_window": same},
+        "size": list(plan.wild_size),
+        "methods": res,
+        "figure": _save(fig, fig_dir / "e4_roc.png"),
+    }
+
+
+def thresholds_of(data: EvalData) -> dict[str, float]:
+    """Each method's F-maximising threshold on the whole wild clip set."""
+    table = data.clip_table("wild")
+    return {m: best_f_threshold(table.scores[m], table.labels) for m in data.method_names}
+
+
+# -- E3: FPR vs ego rotation (Fig. 6) -----------------------------------------------------------
+def e3_fpr_vs_rotation(
+    data: EvalData,
+    fig_dir: Path,
+    thresholds: Mapping[str, float],
+    default_threshold_px: float = 1.0,
+) -> dict[str, Any]:
+    """FPR of background windows of the wild set at each method's F-maximising threshold,
+    binned by the ego's rotation intensity: the mean absolute true camera pitch rate over
+    the frames the window's score depends on ([t + a - T, t + b])."""
+    plan = data.plan
+    a, b = plan.score_window_s
+    intensity: list[Array] = []
+    scores: dict[str, list[Array]] = {m: [] for m in data.method_names}
+    for job in data.jobs["wild"]:
+        info, truth = data.info(job), data.truth(job)
+        centers = background_windows(
+            float(info["duration_s"]),
+            _crossings(info, "lead", hits_only=plan.clear_of_hits_only),
+            step_s=plan.e3_step_s,
+            window=plan.score_window_s,
+        )
+        if not centers.size:
+            continue
+        rate = np.degrees(truth["cam_pitch_rate_rad_s"])
+        intensity.append(
+            mean_abs_rate(truth["frame_t_s"], rate, centers + a - DETECTOR_WINDOW_S, centers + b)
+        )
+        for m, tr in data.traces(job).items():
+            scores[m].append(clip_scores(tr, centers, plan.score_window_s)[0])
+    x = np.concatenate(intensity) if intensity else np.empty(0)
+    edges: Array = (
+        np.unique(np.nanquantile(x, np.linspace(0, 1, plan.e3_bins + 1))) if x.size else np.empty(0)
+    )
+    bins = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, max(len(edges) - 2, 0))
+    res: dict[str, Any] = {}
+    centers_deg = [
+        _f(np.median(x[bins == k])) if (bins == k).any() else None
+        for k in range(max(len(edges) - 1, 0))
+    ]
+    for m in data.method_names:
+        s = np.concatenate(scores[m]) if scores[m] else np.empty(0)
+        thr = float(thresholds[m])
+        nbins = max(len(edges) - 1, 0)
+
+        def per_bin(pos: BoolArray, nbins: int = nbins) -> list[float | None]:
+            return [_f(pos[bins == k].mean()) if (bins == k).any() else None for k in range(nbins)]
+
+        res[m] = {
+            "threshold_px": _f(thr),
+            "fpr": per_bin(s >= thr),
+            "fpr_all": _f((s >= thr).mean()) if s.size else None,
+            "fpr_at_default": per_bin(s >= default_threshold_px),
+            "fpr_all_at_default": _f((s >= default_threshold_px).mean()) if s.size else None,
+        }
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), sharey=True, layout="constrained")
+    panels = (
+        ("fpr", "each method's F-max threshold"),
+        ("fpr_at_default", f"common threshold {default_threshold_px:g} px"),
+    )
+    for ax, (key, title) in zip(axes, panels, strict=True):
+        for m in data.method_names:
+            spec = data.spec(m)
+            pts = [
+                (c, v)
+                for c, v in zip(centers_deg, res[m][key], strict=True)
+                if c is not None and v is not None
+            ]
+            ax.plot(
+                [p[0] for p in pts],
+                [p[1] for p in pts],
+                marker="o",
+                color=spec.color,
+                label=spec.label,
+                ls="--" if not spec.compensated else "-",
+            )
+        ax.set_xlabel("ego rotation: mean |true pitch rate| in the window (deg/s)")
+        ax.set_title(title, fontsize=9)
+        ax.set_ylim(-0.02, 1.02)
+    axes[0].set_ylabel("false-positive rate")
+    axes[0].legend(fontsize=7)
+    fig.suptitle("E3: FPR of background windows vs ego rotation (wild set)")
+    return {
+        "n_windows": int(x.size),
+        "step_s": plan.e3_step_s,
+        "bin_edges_deg_s": [_f(v) for v in edges],
+        "bin_centers_deg_s": centers_deg,
+        "bin_counts": [int((bins == k).sum()) for k in range(max(len(edges) - 1, 0))],
+        "default_threshold_px": default_threshold_px,
+        "methods": res,
+        "figure": _save(fig, fig_dir / "e3_fpr_vs_rotation.png"),
+    }
+
+
+# -- E5: texture loss, range, lead time ---------------------------------------------------------
+def _segments(info: Mapping[str, Any]) -> list[tuple[str, float, float]]:
+    return [(c["kind"], float(c["start_s"]), float(c["end_s"])) for c in info.get("conditions", [])]
+
+
+def _in_segments(t: Array, segs: Sequence[tuple[str, float, float]]) -> BoolArray:
+    m = np.zeros(t.shape, dtype=np.bool_)
+    for _, s0, s1 in segs:
+        m |= (t >= s0) & (t <= s1)
+    return m
+
+
+def e5_texture_loss(
+    data: EvalData, fig_dir: Path, thresholds: Mapping[str, float]
+) -> dict[str, Any]:
+    """Per method on the texture-loss set: AUC and BA (at the method's wild F-max
+    threshold) for clips centred inside the fog / tunnel / night segments vs outside,
+    and the pitch error inside them (1 s high-pass RMS, and RMS after aligning on the
+    second before each segment)."""
+    jobs = data.jobs["texture-loss"]
+    table = data.clip_table("texture-loss")
+    inside = np.zeros(len(table), dtype=np.bool_)
+    i0 = 0
+    for job in jobs:
+        n = sum(1 for c in table.clips if c.recording == job.key)
+        centers = np.asarray([c.t_center_s for c in table.clips[i0 : i0 + n]])
+        inside[i0 : i0 + n] = _in_segments(centers, _segments(data.info(job)))
+        i0 += n
+    labels = table.labels
+    res: dict[str, Any] = {}
+    for m in data.method_names:
+        row: dict[str, Any] = {}
+        for name, mask in (("inside", inside), ("outside", ~inside)):
+            lab, sc = labels[mask], table.scores[m][mask]
+            both = bool(lab.any() and (~lab).any())
+            c = confusion(sc, lab, thresholds[m]) if mask.any() else None
+            row[name] = {
+                "n_pos": int(lab.sum()),
+                "n_neg": int((~lab).sum()),
+                "auc": _f(auc(sc, lab)) if both else None,
+                "ba": _f(c.balanced_accuracy) if c is not None and both else None,
+            }
+        hp_err, al_err = [], []
+        for job in jobs:
+            tr = data.traces(job)[m]
+            truth = data.truth(job)
+            err = tr["phi"] - np.interp(tr.t, truth["frame_t_s"], truth["cam_pitch_rad"])
+            hp = _hp_error(tr.t, err)
+            for _, s0, s1 in _segments(data.info(job)):
+                seg = (tr.t >= s0) & (tr.t <= s1)
+                before = (tr.t >= s0 - 1.0) & (tr.t < s0)
+                hp_err.append(hp[seg])
+                if np.isfinite(err[before]).any():
+                    al_err.append(err[seg] - np.nanmean(err[before]))
+        row["pitch_rms_hp_inside_deg"] = (
+            _f(np.degrees(_rms(np.concatenate(hp_err)))) if hp_err else None
+        )
+        row["pitch_rms_aligned_inside_deg"] = (
+            _f(np.degrees(_rms(np.concatenate(al_err)))) if al_err else None
+        )
+        res[m] = row
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 3.8))
+    names = [m for m in data.method_names if data.spec(m).compensated]
+    vals = [res[m]["pitch_rms_hp_inside_deg"] or 0.0 for m in names]
+    ax.bar(range(len(names)), vals, color=[data.spec(m).color for m in names])
+    ax.set_xticks(range(len(names)), [data.spec(m).label for m in names], rotation=20, fontsize=7)
+    ax.set_ylabel("pitch error, 1 s high-pass RMS (deg)")
+    ax.set_title("E5: pitch error inside fog / tunnel / night (texture-loss set)")
+    return {
+        "counts": table.counts(),
+        "clips_inside": int(inside.sum()),
+        "size": list(data.plan.texture_size),
+        "methods": res,
+        "figure": _save(fig, fig_dir / "e5_texture_loss.png"),
+    }
+
+
+def e5_range(data: EvalData, fig_dir: Path) -> dict[str, Any]:
+    """Recall vs the lead's distance per resolution at each method's F-maximising
+    threshold on that resolution's clips; the range is the lower edge of the first
+    distance bin whose recall is below 50 %."""
+    plan = data.plan
+    edges = np.asarray(plan.distance_bins_m, dtype=np.float64)
+    out: dict[str, Any] = {"bins_m": [float(v) for v in edges], "sizes": {}}
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    styles = ["-", "--", ":", "-."]
+    for k, size in enumerate(plan.range_sizes):
+        jobs = plan.range_jobs(data.jobs, size)
+        table = data.clip_table(f"range-{size[0]}x{size[1]}", jobs)
+        labels = table.labels
+        d = table.true_distance_m
+        per_m: dict[str, Any] = {}
+        for m in data.method_names:
+            sc = table.scores[m]
+            thr = best_f_threshold(sc, labels)
+            hit = sc >= thr
+            recall, counts = [], []
+            rng_m: float | None = None
+            for i in range(edges.size - 1):
+                sel = labels & (d >= edges[i]) & (d < edges[i + 1])
+                counts.append(int(sel.sum()))
+                r = float(hit[sel].mean()) if sel.any() else math.nan
+                recall.append(_f(r))
+                if rng_m is None and sel.any() and r < 0.5:
+                    rng_m = float(edges[i])
+            per_m[m] = {
+                "threshold_px": _f(thr),
+                "recall": recall,
+                "positives": counts,
+                "range_m": rng_m if rng_m is not None else _f(edges[-1]),
+                "range_open": rng_m is None,  # recall never fell below 50 %: range >= last edge
+            }
+        out["sizes"][f"{size[0]}x{size[1]}"] = {
+            "recordings": len(jobs),
+            "positives": int(labels.sum()),
+            "backgrounds": int((~labels).sum()),
+            "methods": per_m,
+        }
+        mid = 0.5 * (edges[:-1] + edges[1:])
+        for m, ls_m in (("fused-kalman", styles[k % 4]), ("uncompensated", styles[k % 4])):
+            if m not in per_m:
+                continue
+            spec = data.spec(m)
+            rec_m = [v if v is not None else np.nan for v in per_m[m]["recall"]]
+            ax.plot(
+                mid,
+                rec_m,
+                linestyle=ls_m,
+                marker="o" if m == "fused-kalman" else "x",
+                color=spec.color,
+                label=f"{spec.label}, {size[0]}x{size[1]}",
+            )
+    ax.axhline(0.5, color="0.6", lw=0.8)
+    ax.set_xlabel("lead distance at the crossing (m)")
+    ax.set_ylabel("recall at the F-max threshold")
+    ax.set_ylim(-0.02, 1.02)
+    ax.legend(fontsize=7)
+    ax.set_title("E5: detection range per resolution (wild drives)")
+    out["figure"] = _save(fig, fig_dir / "e5_range.png")
+    return out
+
+
+def e5_lead_time(data: EvalData, fig_dir: Path) -> dict[str, Any]:
+    """The product's alerts (default detector settings) matched to the wild set's lead
+    crossings: recall, false alarms per minute and the lead time (ego arrival minus
+    alert emission) of the detected ones."""
+    from roadpreview.pipeline.truthmatch import match_alerts
+
+    res: dict[str, Any] = {}
+    times: dict[str, list[float]] = {}
+    for m in data.method_names:
+        hits = expected = fa = 0
+        minutes = 0.0
+        lead_times: list[float] = []
+        for job in data.jobs["wild"]:
+            info = data.info(job)
+            dur = float(info["duration_s"])
+            rep = match_alerts(
+                data.traces(job)[m].alert_list(),
+                info["events"],
+                t0=0.0,
+                duration_s=dur,
+                max_distance_m=math.inf,
+            )
+            hits += rep.hits
+            expected += rep.expected
+            fa += len(rep.false_alarms)
+            minutes += dur / 60.0
+            lead_times += [
+                r.lead_time_s
+                for r in rep.rows
+                if r.alert is not None and r.expected and math.isfinite(r.lead_time_s)
+            ]
+        arr = np.asarray(lead_times)
+        times[m] = lead_times
+        res[m] = {
+            "alerts_hits": hits,
+            "lead_crossings": expected,
+            "recall": _f(hits / expected) if expected else None,
+            "false_alarms_per_min": _f(fa / minutes) if minutes else None,
+            "lead_time_median_s": _f(np.median(arr)) if arr.size else None,
+            "lead_time_p10_s": _f(np.percentile(arr, 10)) if arr.size else None,
+            "lead_time_p90_s": _f(np.percentile(arr, 90)) if arr.size else None,
+            "lead_time_min_s": _f(arr.min()) if arr.size else None,
+            "late_alerts": int((arr <= 0).sum()),
+        }
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 3.8))
+    shown = [m for m in data.method_names if times[m]]
+    if shown:
+        ax.hist(
+            [times[m] for m in shown],
+            bins=12,
+            color=[data.spec(m).color for m in shown],
+            label=[data.spec(m).label for m in shown],
+        )
+    ax.axvline(0, color="k", lw=0.8)
+    ax.set_xlabel("lead time: ego reaches the anomaly minus alert emitted (s)")
+    ax.set_ylabel("alerts")
+    ax.legend(fontsize=7)
+    ax.set_title("E5: alert lead time (wild set, default detector)")
+    return {"methods": res, "figure": _save(fig, fig_dir / "e5_lead_time.png")}

@@ -1,0 +1,707 @@
+"""The evaluation report: Markdown tables and figures from ``results.json``, and the
+console summary (Table I and the headline figures).
+
+The report is regenerated whole by ``roadpreview evaluate --report PATH``; its
+figures are copied next to it into ``eval/`` and linked relatively.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import shutil
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from roadpreview.eval.suite import EvalResults
+
+#: subsets of Table I, in column order
+TABLE1_SUBSETS = ("entire", "hard", "easy")
+TRACKED_SUBSETS = ("tracked", "tracked-hard", "tracked-easy")
+#: fewer hard positives than this: the hard subset is flagged as too small to be meaningful
+MIN_HARD_POSITIVES = 15
+
+
+def _num(v: Any, fmt: str = ".2f") -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    return format(v, fmt)
+
+
+def _pm(mean: Any, std: Any) -> str:
+    if mean is None:
+        return "–"
+    return f"{mean:.2f} ± {std:.2f}" if std is not None else f"{mean:.2f}"
+
+
+def _compact(x: Any) -> str:
+    """A settings mapping on one line (JSON without spaces)."""
+    return json.dumps(x, separators=(",", ":"), default=str)
+
+
+def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _label(d: Mapping[str, Any], m: str) -> str:
+    return str(d["methods"][m]["label"])
+
+
+# -- Table I ------------------------------------------------------------------------------------
+def table1_rows(d: Mapping[str, Any], subsets: Sequence[str] = TABLE1_SUBSETS) -> list[list[str]]:
+    e4 = d["results"]["e4"]["methods"]
+    rows = []
+    for m, r in e4.items():
+        row = [_label(d, m)]
+        for sub in subsets:
+            s = r["subsets"].get(sub)
+            if s is None:
+                row += ["–", "–", "–"]
+                continue
+            row += [_pm(s["ba_mean"], s["ba_std"]), _pm(s["f_mean"], s["f_std"]), _num(s["auc"])]
+        rows.append(row)
+    return rows
+
+
+def table1_header(d: Mapping[str, Any], subsets: Sequence[str] = TABLE1_SUBSETS) -> list[str]:
+    anym = next(iter(d["results"]["e4"]["methods"].values()))
+    head = ["method"]
+    for sub in subsets:
+        s = anym["subsets"].get(sub, {})
+        n = f" ({s.get('n_pos', 0)}+/{s.get('n_neg', 0)}−)"
+        head += [f"{sub} BA{n}", f"{sub} F", f"{sub} AUC"]
+    return head
+
+
+def table1_text(d: Mapping[str, Any], subsets: Sequence[str] = TABLE1_SUBSETS) -> str:
+    """Table I as aligned plain text (console)."""
+    head = table1_header(d, subsets)
+    rows = table1_rows(d, subsets)
+    widths = [max(len(r[i]) for r in [head, *rows]) for i in range(len(head))]
+    out = ["  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True))]
+    out += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
+    return "\n".join(out)
+
+
+def headline(d: Mapping[str, Any]) -> str:
+    """The headline figures in a few lines (console)."""
+    res = d["results"]
+    lines = []
+    if "e4" in res:
+        c = res["e4"]["counts"]
+        lines.append(
+            f"wild set: {c['positives']} positives ({c['hard_positives']} hard), "
+            f"{c['backgrounds']} backgrounds ({c['hard_backgrounds']} hard), "
+            f"{c['recordings']} recordings"
+        )
+        fk = res["e4"]["methods"].get("fused-kalman")
+        if fk:
+            lines.append(
+                f"fused-kalman: F-max threshold {_num(fk['threshold_f_max_px'])} px on the whole "
+                f"set (folds {', '.join(_num(v) for v in fk['fold_thresholds_px'])}); "
+                "default 1.0 px"
+            )
+    if "e1" in res:
+        for m in ("uncompensated", "fused-kalman"):
+            r = res["e1"]["methods"].get(m)
+            if r:
+                lines.append(
+                    f"E1 {m}: s(d) = {_num(r['alpha'])}·fδ/d + {_num(r['beta'])} "
+                    f"(R² {_num(r['r2'])}), separates up to "
+                    f"{_num(r['separation_distance_m'], '.1f')} m"
+                )
+    if "e5" in res:
+        tl = res["e5"]["texture_loss"]["methods"]
+        parts = [
+            f"{m} {_num(tl[m]['pitch_rms_hp_inside_deg'], '.3f')}"
+            for m in ("visual", "fused-kalman", "fused-fg")
+            if m in tl
+        ]
+        lines.append("E5 pitch error in low texture (deg, 1 s high-pass RMS): " + ", ".join(parts))
+        for size, r in res["e5"]["range"]["sizes"].items():
+            fk = r["methods"].get("fused-kalman")
+            if fk:
+                more = "+" if fk["range_open"] else ""
+                lines.append(
+                    f"E5 range {size} (fused-kalman): {_num(fk['range_m'], '.0f')}{more} m"
+                )
+    lines.append(f"wall time {d['timing']['wall_s']:.0f} s")
+    return "\n".join(lines)
+
+
+# -- the Markdown report ------------------------------------------------------------------------
+def write_report(results: EvalResults, path: str | Path, *, command: str = "") -> Path:
+    """Write the Markdown report to ``path``; figures go to ``<path's folder>/eval/``."""
+    path = Path(path)
+    fig_dir = path.parent / "eval"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    for png in sorted(results.figures_dir.glob("*.png")):
+        shutil.copy2(png, fig_dir / png.name)
+    d = results.data
+    text = render(d, fig_prefix="eval/", command=command)
+    path.write_text(text)
+    return path
+
+
+def render(d: Mapping[str, Any], *, fig_prefix: str = "eval/", command: str = "") -> str:
+    plan = d["plan"]
+    res = d["results"]
+    quick = plan["name"] == "quick"
+    t = d["timing"]
+    out: list[str] = []
+    w = out.append
+    w("# Evaluation report")
+    w("")
+    if quick:
+        sizes = ", ".join(f"{w_}x{h_}" for w_, h_ in plan["range_sizes"])
+        w(
+            "> **QUICK CONFIGURATION.** These numbers come from the `--quick` run (a few short "
+            f"drives at {plan['wild_size'][0]}x{plan['wild_size'][1]}, "
+            f"{len(plan['e1_gaps_m'])} gaps, the detection range at {sizes} only): a smoke "
+            "test of the whole evaluation that the test suite runs, not a measurement. The "
+            "full configuration is regenerated with the first command below."
+        )
+        w("")
+    w(
+        "The same simulated recordings are run through every method; only the pitch estimator "
+        "and the fusion back end differ (one vision pass per recording is shared by all "
+        "methods, `roadpreview.eval.runner`). Generated by `roadpreview evaluate` "
+        f"(roadpreview {d['version']}, Python {d['python']}) on "
+        f"{_dt.date.today().isoformat()} in {t['wall_s'] / 60:.1f} min wall time with "
+        f"{t['workers']} worker process(es)."
+    )
+    w("")
+    w("## How to regenerate")
+    w("")
+    w("```sh")
+    w("roadpreview evaluate --out runs/eval --report docs/evaluation.md        # full, < 1 h")
+    w("roadpreview evaluate --quick --out runs/eval-quick --report docs/evaluation.md  # quick")
+    w("```")
+    if command:
+        w("")
+        w(f"This report: `{command}`.")
+    w("")
+    w(
+        "Recordings and per-method traces are cached in the output folder (`data/`, "
+        "`traces/`); a trace is recomputed when the method's configuration, the package "
+        "version or the pipeline's source changes, a recording when its scenario or the "
+        "simulator's source changes. All numbers are in `results.json` there."
+    )
+    w("")
+    _methods_section(d, w)
+    _data_section(d, w)
+    if "e4" in res:
+        _e4_section(d, w, fig_prefix)
+    if "e1" in res:
+        _e1_section(d, w, fig_prefix)
+    if "e2" in res:
+        _e2_section(d, w, fig_prefix)
+    if "e3" in res:
+        _e3_section(d, w, fig_prefix)
+    if "e5" in res:
+        _e5_section(d, w, fig_prefix)
+    _timing_section(d, w)
+    return "\n".join(out) + "\n"
+
+
+def _methods_section(d: Mapping[str, Any], w: Any) -> None:
+    w("## Methods")
+    w("")
+    rows = []
+    for m, r in d["methods"].items():
+        opts = []
+        if r["pitch"].get("options"):
+            opts.append(f"pitch options {r['pitch']['options']}")
+        if r["fusion"].get("options"):
+            opts.append(f"fusion options {r['fusion']['options']}")
+        if r["nan_std_rad"] is not None:
+            opts.append(
+                f"estimates without a std get {math.degrees(r['nan_std_rad']):.2f}° (see notes)"
+            )
+        heave = r.get("heave")
+        rows.append(
+            [
+                f"`{m}`",
+                r["label"],
+                f"`{r['estimator']}`",
+                f"`{r['backend']}`",
+                "–" if heave is None else ("on" if heave else "off"),
+                "; ".join(opts),
+            ]
+        )
+    w(
+        _md_table(
+            ["name", "label", "pitch estimator", "fusion back end", "heave term", "notes"], rows
+        )
+    )
+    w("")
+    w(
+        "Heave term: `[heave] enabled`, the camera's heave from the accelerometer subtracted "
+        "as f Δz / d (docs/method.md). The paper's methods (and the IMU-only pitch) run "
+        "without it, as eq. (4); ours fused use the product default."
+    )
+    w("")
+    w(
+        "Everything else is the default `PipelineConfig` (or the `--config` file): vision "
+        "(motion finder), detector and alerts. The reference method `fused-kalman` runs the "
+        "vision front end; its fused pitch is the vision's horizon for every method. "
+        "Detector (`[anomaly.detector]`):"
+    )
+    w("")
+    det = d["detector"]
+    flat = {k: v for k, v in det.items() if not isinstance(v, dict)}
+    w(", ".join(f"`{k}` = {v}" for k, v in flat.items()))
+    w("")
+    w(
+        "<details><summary>Every setting of each method's estimator and back end, and of the "
+        "shared vision front end</summary>"
+    )
+    w("")
+    for m, r in d["methods"].items():
+        w(f"`{m}` pitch estimator `{r['estimator']}`: `{_compact(r.get('pitch_settings', {}))}`")
+        w("")
+        w(f"`{m}` fusion back end `{r['backend']}`: `{_compact(r.get('fusion_settings', {}))}`")
+        w("")
+    w(f"vision: `{_compact(d.get('vision', {}))}`")
+    w("")
+    if d.get("heave_settings") is not None:
+        w(f"heave (when on): `{_compact(d['heave_settings'])}`")
+        w("")
+    w(f"alerts: `{_compact(d.get('alert', {}))}`")
+    w("")
+    w("</details>")
+    w("")
+    w(
+        "Note on `essential`: `EssentialMatrixPitchEstimator` reports no standard deviation "
+        "(NaN) and the `visual-only` chain refuses a measurement with a non-finite std, so in "
+        "the product `--estimator essential` never compensates (it equals `uncompensated`). "
+        "The evaluation wraps the estimator (`NanStdFallback`) to give its successful fits the "
+        "std in the table; the std only affects `phi_std`, not the chained pitch."
+    )
+    w("")
+
+
+def _data_section(d: Mapping[str, Any], w: Any) -> None:
+    plan = d["plan"]
+    w("## Data sets")
+    w("")
+    rows = []
+    for name, ds in d["datasets"].items():
+        seeds = ds["seeds"]
+        seed_txt = f"{seeds[0]}–{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
+        durs = sorted(set(ds["duration_s"]))
+        rows.append(
+            [
+                name,
+                str(len(ds["recordings"])),
+                seed_txt,
+                ", ".join(f"{v:g}" for v in durs) + " s",
+                f"{ds['size'][0]}x{ds['size'][1]}" if ds["size"] else "–",
+                str(ds["frames"]),
+            ]
+        )
+    w(_md_table(["set", "recordings", "seeds", "duration", "resolution", "frames"], rows))
+    w("")
+    dens = plan["wild_anomaly_density_per_km"]
+    w(
+        "* `wild`: preset `wild` (rough ISO B-D road, random anomalies, speed 20-60 km/h, gap "
+        "5-35 m, lead manoeuvres, oncoming traffic, smartphone-grade IMU with a 0-80 ms clock "
+        f"offset), {plan['wild_duration_s']:g} s per drive"
+        + (f", anomaly density raised to {dens:g}/km (preset: 30/km)" if dens else "")
+        + f", seeds {plan['seed']} + i."
+    )
+    w(
+        f"* `texture-loss`: preset `texture-loss` (a `wild` drive with fog, a tunnel and night, "
+        f"each about a sixth of the drive), seeds {plan['seed']} + 1000 + i."
+    )
+    if plan["e1_short_crossings_s"]:
+        w(
+            "* `controlled`: preset `controlled` (smooth ISO A road, 20 km/h, fixed gap) shortened "
+            f"to {plan['e1_short_duration_s']:g} s with paper bumps (6 cm, 2 m, 7°) placed so "
+            f"that the lead crosses them at {plan['e1_short_crossings_s']} s; gaps "
+            f"{', '.join(f'{g:g}' for g in plan['e1_gaps_m'])} m, seed {plan['seed']}."
+        )
+    else:
+        w(
+            "* `controlled`: preset `controlled` (three paper bumps, 6 cm, 2 m, 7°, smooth ISO A "
+            f"road, 20 km/h), gaps {', '.join(f'{g:g}' for g in plan['e1_gaps_m'])} m, seed "
+            f"{plan['seed']}."
+        )
+    w(
+        "* `range-WxH`: the first wild seeds re-simulated at another resolution (the wild set "
+        "itself serves its own resolution)."
+    )
+    w("")
+    a, b = plan["score_window_s"]
+    w("**Clips.** ")
+    w(
+        f"Positive clips are centred on the lead's front axle over an anomaly it hits; their "
+        f"score is the maximum of s(t) over [t_c {a:+g} s, t_c {b:+g} s] (s is the std of y_c "
+        "over the last second, so it rises from the crossing and stays up for about one second "
+        "plus the lead's response). Background clips use the same window; they are at least "
+        f"{plan['clearance_s']:g} s from any anomaly the lead hits"
+        + (" (anomalies it passes beside do not count)" if plan["clear_of_hits_only"] else "")
+        + f" and {plan['background_spacing_s']:g} s apart; "
+        f"{plan['ego_crossing_share']:.0%} of them are centred on the ego's own crossings "
+        "of an anomaly (drawn first), the rest at random. "
+        f"Positives need {plan['clip_half_s']:g} s of recording on each side. A clip without "
+        "any s in its window (no lead) scores 0. **Hard**: positives whose ego crosses another "
+        "anomaly within 0.5 s of the lead's crossing (the simulator's truth `hard`, the "
+        f"paper's definition), and backgrounds whose ego crosses an anomaly in [t {a - 1:+g} s, "
+        f"t {b:+g} s] (the frames the score depends on). **Easy**: the rest. **Tracked**: "
+        "clips where the lead's box overlaps the true box with IoU >= 0.5 in at least 80 % of "
+        "those frames (the vision is shared, so the same clips for every method)."
+    )
+    w("")
+
+
+def _e4_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
+    e4 = d["results"]["e4"]
+    plan = d["plan"]
+    c = e4["counts"]
+    w("## E4: the paper's Table I (wild set)")
+    w("")
+    w(
+        f"{c['positives']} positive and {c['backgrounds']} background clips from "
+        f"{c['recordings']} recordings at {e4['size'][0]}x{e4['size'][1]}; hard subset: "
+        f"{c['hard_positives']} positives and {c['hard_backgrounds']} backgrounds "
+        f"({c['ego_crossing_backgrounds']} backgrounds centred on ego crossings); "
+        f"{c['tracked']} clips tracked; in {c['ego_same_anomaly_in_window']} positives the "
+        "ego itself crosses the same anomaly inside the score window (short gap, high speed), "
+        "which adds the ego's pitching to the uncompensated score of a true event. "
+        "Balanced accuracy (BA) and F-score at the F-maximising "
+        f"threshold chosen on the training folds of a {plan['cv_k']}-fold cross-validation "
+        f"(folds grouped by recording, stratified, seed {plan['cv_seed']}), mean ± std over the "
+        "folds; AUC of the subset's clips (no threshold)."
+    )
+    w("")
+    if c["hard_positives"] < MIN_HARD_POSITIVES:
+        w(
+            f"**The hard subset has only {c['hard_positives']} positives (< {MIN_HARD_POSITIVES}): "
+            "its numbers are too noisy to rank the methods.**"
+        )
+        w("")
+    w(_md_table(table1_header(d), table1_rows(d)))
+    w("")
+    w("The same, on the tracked clips only (threshold still chosen on all training clips):")
+    w("")
+    w(_md_table(table1_header(d, TRACKED_SUBSETS), table1_rows(d, TRACKED_SUBSETS)))
+    w("")
+    w(f"![ROC curves]({fp}{e4['figure']})")
+    w("")
+    w("**Threshold.** ")
+    rows = []
+    for m, r in e4["methods"].items():
+        rows.append(
+            [
+                _label(d, m),
+                _num(r["threshold_f_max_px"]),
+                ", ".join(_num(v) for v in r["fold_thresholds_px"]),
+                f"{_num(r['at_f_max']['tpr'])} / {_num(r['at_f_max']['fpr'])}",
+                f"{_num(r['at_1px']['tpr'])} / {_num(r['at_1px']['fpr'])}",
+                str(r["no_lead_clips"]),
+            ]
+        )
+    w(
+        _md_table(
+            [
+                "method",
+                "F-max threshold, all clips (px)",
+                "fold thresholds (px)",
+                "TPR / FPR there",
+                "TPR / FPR at 1.0 px (product default)",
+                "clips without lead",
+            ],
+            rows,
+        )
+    )
+    w("")
+    fk = e4["methods"].get("fused-kalman")
+    if fk and fk["threshold_f_max_px"] is not None:
+        thr = fk["threshold_f_max_px"]
+        w(
+            f"For `fused-kalman` the F-maximising threshold on the whole set is {thr:.2f} px at "
+            f"{e4['size'][0]}x{e4['size'][1]} against the product default "
+            "`anomaly.detector.threshold_px` = 1.0 px. Signals and the pitch residual scale with "
+            "the focal length, so a pixel threshold holds for one resolution only. The F-score "
+            "weighs misses and false alarms equally on a set with as many backgrounds as "
+            "positives; a product that must keep false alarms rare (about one per minute, "
+            "docs/pipeline.md) needs a higher threshold than the F-maximising one. "
+            "The default is unchanged."
+        )
+        w("")
+
+
+def _e1_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
+    e1 = d["results"]["e1"]
+    w("## E1: signal strength vs distance (paper Fig. 4)")
+    w("")
+    w(
+        f"`controlled` drives at {e1['size'][0]}x{e1['size'][1]} "
+        f"(f = {_num(e1['focal_px'], '.0f')} px). Positive: the clip score at each bump "
+        "crossing of the lead; background: s at every "
+        f"frame from {d['plan']['e1_start_s']:g} s on that is not within "
+        f"[{d['plan']['e1_exclude_s'][0]:g}, {d['plan']['e1_exclude_s'][1]:+g}] s of a crossing "
+        "of either car. Fit s(d) = α f δ / d + β by least squares over the crossings (δ = 0.06 m, "
+        "d the true lead distance at the crossing). Separation distance: the largest distance up "
+        "to which (from the shortest gap on, without a break) the median crossing score exceeds "
+        "the 99th percentile of that drive's background s (of all drives pooled when a drive has "
+        "fewer than 30 background frames). The paper reports about 20 m at 1080p."
+    )
+    w("")
+    rows = []
+    for m, r in e1["methods"].items():
+        rows.append(
+            [
+                _label(d, m),
+                _num(r["alpha"]),
+                _num(r["beta"]),
+                _num(r["r2"]),
+                str(r["n_points"]),
+                _num(r["background_p99_pooled"]),
+                _num(r["separation_distance_m"], ".1f"),
+            ]
+        )
+    w(
+        _md_table(
+            ["method", "α", "β (px)", "R²", "crossings", "background p99 (px)", "separation (m)"],
+            rows,
+        )
+    )
+    w("")
+    fk = e1["methods"].get("fused-kalman")
+    if fk:
+        w("Per gap (`fused-kalman`):")
+        w("")
+        rows = [
+            [
+                f"{g['gap_m']:g}",
+                _num(g["distance_m"], ".1f"),
+                ", ".join(_num(v) for v in g["positive_s"]),
+                _num(g["background_p99"]),
+                "yes" if g["separated"] else "no",
+            ]
+            for g in fk["per_gap"]
+        ]
+        w(
+            _md_table(
+                ["gap (m)", "distance (m)", "crossing scores (px)", "background p99", "separated"],
+                rows,
+            )
+        )
+        w("")
+    w(f"![E1]({fp}{e1['figure']})")
+    w("")
+
+
+def _e2_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
+    e2 = d["results"]["e2"]
+    w("## E2: pitch while the ego crosses a bump (paper Fig. 5)")
+    w("")
+    lo, hi = e2["window_s"]
+    w(
+        f"Recording `{e2['recording']}`, the ego's front axle over the bump at "
+        f"{e2['ego_crossing_s']:.2f} s; window {lo:.2f}-{hi:.2f} s. The pipeline's pitch is "
+        "relative to its first frame: each curve is shifted by its mean difference to the true "
+        "camera pitch over the first second of the window. Columns: RMS and largest error in "
+        "the window after that alignment; RMS of the 1 s high-pass error (error minus its "
+        "trailing 1 s mean, what the detector window sees) over the whole drive; largest s in "
+        "the window (the ego's own crossing, no lead event: ideally small)."
+    )
+    w("")
+    rows = [
+        [
+            _label(d, m),
+            _num(r["rms_error_window_deg"], ".3f"),
+            _num(r["max_abs_error_window_deg"], ".3f"),
+            _num(r["rms_error_hp_drive_deg"], ".3f"),
+            _num(r["s_max_window_px"]),
+        ]
+        for m, r in e2["methods"].items()
+    ]
+    w(
+        _md_table(
+            [
+                "method",
+                "RMS error (deg)",
+                "max error (deg)",
+                "1 s high-pass RMS, drive (deg)",
+                "max s (px)",
+            ],
+            rows,
+        )
+    )
+    w("")
+    w(f"![E2]({fp}{e2['figure']})")
+    w("")
+
+
+def _e3_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
+    e3 = d["results"]["e3"]
+    a, b = d["plan"]["score_window_s"]
+    w("## E3: false positives vs ego rotation (paper Fig. 6)")
+    w("")
+    w(
+        f"{e3['n_windows']} background windows of the wild set, one every {e3['step_s']:g} s "
+        "wherever the score cannot see a lead crossing; each scored like a clip. Rotation "
+        "intensity: the mean absolute true camera pitch rate (deg/s; equivalently the mean "
+        f"absolute pitch change per frame x fps) over [t {a - 1:+g} s, t {b:+g} s]. Bins: "
+        "equal-count quantiles. FPR at each method's F-maximising threshold on the wild clips "
+        f"(first table) and at the common product default {e3['default_threshold_px']:g} px "
+        "(second table)."
+    )
+    w("")
+    centers = e3["bin_centers_deg_s"]
+    bins = [
+        f"{_num(c, '.2f')} deg/s (n={n})" for c, n in zip(centers, e3["bin_counts"], strict=True)
+    ]
+    rows = []
+    for m, r in e3["methods"].items():
+        rows.append([_label(d, m), _num(r["threshold_px"])] + [_num(v) for v in r["fpr"]])
+    w(_md_table(["method", "threshold (px)", *bins], rows))
+    w("")
+    rows = [
+        [_label(d, m), _num(r["fpr_all_at_default"])] + [_num(v) for v in r["fpr_at_default"]]
+        for m, r in e3["methods"].items()
+    ]
+    w(_md_table(["method", "all windows", *bins], rows))
+    w("")
+    w(f"![E3]({fp}{e3['figure']})")
+    w("")
+
+
+def _e5_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
+    e5 = d["results"]["e5"]
+    tl = e5["texture_loss"]
+    c = tl["counts"]
+    w("## E5: beyond the paper")
+    w("")
+    w("### Texture loss (fog, tunnel, night)")
+    w("")
+    w(
+        f"`texture-loss` set at {tl['size'][0]}x{tl['size'][1]}: {c['positives']} positive and "
+        f"{c['backgrounds']} background clips, {tl['clips_inside']} of them centred inside a "
+        "segment. AUC and BA (at the method's F-maximising threshold on the wild set) inside "
+        "vs outside the segments; pitch error inside the segments: 1 s high-pass RMS, and the "
+        "RMS after aligning on the second before each segment (drift while texture is lost)."
+    )
+    w("")
+    rows = []
+    for m, r in tl["methods"].items():
+        ins, outs = r["inside"], r["outside"]
+        rows.append(
+            [
+                _label(d, m),
+                f"{_num(ins['auc'])} / {_num(ins['ba'])} ({ins['n_pos']}+/{ins['n_neg']}−)",
+                f"{_num(outs['auc'])} / {_num(outs['ba'])} ({outs['n_pos']}+/{outs['n_neg']}−)",
+                _num(r["pitch_rms_hp_inside_deg"], ".3f"),
+                _num(r["pitch_rms_aligned_inside_deg"], ".3f"),
+            ]
+        )
+    w(
+        _md_table(
+            [
+                "method",
+                "inside AUC / BA",
+                "outside AUC / BA",
+                "pitch error inside, 1 s HP RMS (deg)",
+                "aligned RMS (deg)",
+            ],
+            rows,
+        )
+    )
+    w("")
+    w(f"![E5 texture]({fp}{tl['figure']})")
+    w("")
+    rg = e5["range"]
+    bins = rg["bins_m"]
+    w("### Detection range per resolution")
+    w("")
+    w(
+        "Recall of the positive clips per bin of the true lead distance, at each method's "
+        "F-maximising threshold on that resolution's own clips (not cross-validated). Range: "
+        "the lower edge of the first bin whose recall is below 50 % (`≥ x`: never below 50 % "
+        "up to the last edge)."
+    )
+    w("")
+    bin_names = [f"{bins[i]:g}-{bins[i + 1]:g} m" for i in range(len(bins) - 1)]
+    for size, r in rg["sizes"].items():
+        w(
+            f"**{size}** ({r['recordings']} recordings, {r['positives']} positives, "
+            f"{r['backgrounds']} backgrounds)"
+        )
+        w("")
+        rows = []
+        for m, x in r["methods"].items():
+            rng_txt = ("≥ " if x["range_open"] else "") + _num(x["range_m"], ".0f") + " m"
+            rows.append(
+                [_label(d, m), _num(x["threshold_px"]), rng_txt]
+                + [f"{_num(v)} ({n})" for v, n in zip(x["recall"], x["positives"], strict=True)]
+            )
+        w(_md_table(["method", "threshold (px)", "range", *bin_names], rows))
+        w("")
+    w(f"![E5 range]({fp}{rg['figure']})")
+    w("")
+    lt = e5["lead_time"]
+    w("### Alert lead time")
+    w("")
+    w(
+        "The product's own alerts (default detector, `threshold_px` = 1.0 px, NMS, "
+        "suppression) on the wild set, matched to the lead's crossings as `roadpreview replay "
+        "--truth` does (crossing within -0.6/+1.2 s of the alert's crossing time). Lead time = "
+        "the ego's front axle over the anomaly minus the alert's emission. `uncompensated` "
+        "runs in mode DEGRADED, whose events are suppressed by design, so it raises no alert; "
+        "`imu-only` likewise when its mode is DEGRADED."
+    )
+    w("")
+    rows = [
+        [
+            _label(d, m),
+            f"{r['alerts_hits']}/{r['lead_crossings']}",
+            _num(r["false_alarms_per_min"], ".1f"),
+            _num(r["lead_time_median_s"]),
+            _num(r["lead_time_p10_s"]),
+            _num(r["lead_time_p90_s"]),
+            str(r["late_alerts"]),
+        ]
+        for m, r in lt["methods"].items()
+    ]
+    w(
+        _md_table(
+            [
+                "method",
+                "detected",
+                "false alarms / min",
+                "lead time median (s)",
+                "p10 (s)",
+                "p90 (s)",
+                "alerts after arrival",
+            ],
+            rows,
+        )
+    )
+    w("")
+    w(f"![E5 lead time]({fp}{lt['figure']})")
+    w("")
+
+
+def _timing_section(d: Mapping[str, Any], w: Any) -> None:
+    t = d["timing"]
+    w("## Run time")
+    w("")
+    w(
+        f"Wall time {t['wall_s']:.0f} s ({t['processing_wall_s']:.0f} s simulating and running "
+        f"the methods with {t['workers']} worker(s), {t['experiments_wall_s']:.0f} s for the "
+        f"experiments and figures). {t['frames_simulated']} frames simulated "
+        f"({_num(t['simulate_cpu_ms_per_frame'], '.1f')} ms CPU per frame), "
+        f"{t['frames_evaluated']} frames through all methods "
+        f"({_num(t['evaluate_cpu_ms_per_frame'], '.1f')} ms CPU per frame for all methods "
+        "together). CPU time per method (its pipeline steps plus an equal share of the vision): "
+        + ", ".join(f"{m} {s:.0f} s" for m, s in t["method_cpu_s"].items())
+        + ". Wall times depend on what else runs on the machine; the CPU times do not."
+    )
+    w("")

@@ -1,0 +1,583 @@
+"""Run every method over the same recordings: one vision pass, one pipeline per method.
+
+Per recording, the reference method's pipeline (`REFERENCE_METHOD`, the
+product's fused Kalman) runs the vision front end once per frame; its
+`FrameVision` goes to every method's ``Pipeline.push_vision``, and every
+pipeline gets the same CAN frames (``push_can``) in time-stamp order, the
+streams merged lazily as in ``roadpreview replay``. So the methods differ only
+where their configurations do (pitch estimator, fusion back end, heave term).
+Each method's per-frame output is kept as a compact `Trace` (.npz) in the run
+folder, keyed by the recording,
+the method and a digest of the configurations, the package version and the
+source of the modules that produce it: a second run reuses it.
+
+Recordings are simulated on demand (deterministic by seed, reused when their
+scenario and the simulator's source are unchanged). Work is parallel over
+recordings in worker processes, one recording (generation + all methods) per
+task, one thread per worker.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+import os
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from functools import cache
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from roadpreview import __version__
+from roadpreview.configtools import to_mapping
+from roadpreview.errors import InputDataError, OperationError
+from roadpreview.eval.methods import REFERENCE_METHOD, MethodSpec, NanStdFallback, method_config
+from roadpreview.pipeline.config import PipelineConfig
+from roadpreview.sim.scenario import ScenarioConfig
+
+log = logging.getLogger(__name__)
+
+Array = NDArray[np.float64]
+
+#: bump when the trace layout or the way traces are produced changes
+TRACE_FORMAT = 2
+_PACKAGE = Path(__file__).resolve().parents[1]
+#: sub-packages whose source does not change what a pipeline computes from a recording
+_NOT_PIPELINE = ("eval", "cli", "bench", "sim")
+
+
+# -- digests ------------------------------------------------------------------------------------
+def _digest(obj: Any) -> str:
+    text = json.dumps(obj, sort_keys=True, default=str, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@cache
+def _source_digest(parts: tuple[str, ...], exclude: tuple[str, ...] = ()) -> str:
+    """Digest of the package's source files under ``parts`` (``("",)``: all), minus
+    ``exclude``; data files (DBC, mappings) included."""
+    h = hashlib.sha256(__version__.encode())
+    for part in parts:
+        root = _PACKAGE / part
+        for path in [root] if root.is_file() else sorted(root.rglob("*")):
+            rel = path.relative_to(_PACKAGE)
+            if not path.is_file() or path.suffix not in (".py", ".dbc", ".toml"):
+                continue
+            if rel.parts and rel.parts[0] in exclude:
+                continue
+            h.update(str(rel).encode())
+            h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def pipeline_source_digest() -> str:
+    """What the traces depend on besides the configuration: the pipeline's source code."""
+    return _source_digest(("",), _NOT_PIPELINE)
+
+
+def simulator_source_digest() -> str:
+    """What a recording depends on besides its scenario: the simulator's source code."""
+    return _source_digest(("sim", "data", "camera.py", "canbus"))
+
+
+def scenario_digest(cfg: ScenarioConfig, sim: str | None = None) -> str:
+    """What a recording of ``cfg`` is: its scenario and the simulator's source."""
+    return _digest({"scenario": to_mapping(cfg), "sim": sim or simulator_source_digest()})
+
+
+# -- traces -------------------------------------------------------------------------------------
+#: per-frame float columns of a trace
+FLOAT_COLUMNS = (
+    "t",
+    "y",
+    "y_c",
+    "phi",
+    "phi_std",
+    "s",
+    "s_left",
+    "s_right",
+    "threshold_px",
+    "lead_distance_m",
+    "box_x0",
+    "box_y0",
+    "box_x1",
+    "box_y1",
+)
+#: per-frame integer columns (mode: `FusionMode` value; suppressed: flag bits)
+INT_COLUMNS = ("mode", "suppressed", "lead_found", "textured")
+#: per-alert columns (None -> NaN; side and mode as their enum values)
+ALERT_COLUMNS = (
+    "t_s",
+    "t_emit_s",
+    "distance_m",
+    "time_to_arrival_s",
+    "severity_px",
+    "height_mm",
+    "confidence",
+)
+#: per-event columns (all detector peaks, suppressed ones included)
+EVENT_COLUMNS = ("t_s", "t_peak_s", "t_emit_s", "s_px", "lead_distance_m", "suppressed")
+
+
+@dataclass(frozen=True)
+class Trace:
+    """One method's output on one recording, per frame, on the recording's clock
+    (0 = the simulation's t = 0, the time base of ``truth.json`` and ``truth.npz``)."""
+
+    method: str
+    columns: dict[str, NDArray[Any]]  #: `FLOAT_COLUMNS` + `INT_COLUMNS`, one value per frame
+    alerts: dict[str, Array]  #: `ALERT_COLUMNS` (+ ``side``, ``mode``), one value per alert
+    events: dict[str, Array]  #: `EVENT_COLUMNS`, one value per detector event
+    seconds: float = math.nan  #: processing time of this method (its share), s
+
+    def __getitem__(self, name: str) -> NDArray[Any]:
+        return self.columns[name]
+
+    @property
+    def t(self) -> Array:
+        return self.columns["t"]
+
+    @property
+    def s(self) -> Array:
+        return self.columns["s"]
+
+    def __len__(self) -> int:
+        return int(self.columns["t"].size)
+
+    def alert_list(self) -> list[Any]:
+        """The alerts as `roadpreview.anomaly.alert.Alert` objects (recording clock)."""
+        from roadpreview.anomaly.alert import Alert
+        from roadpreview.anomaly.base import Side
+        from roadpreview.fusion.mode import FusionMode
+
+        def opt(v: float) -> float | None:
+            return float(v) if math.isfinite(v) else None
+
+        a = self.alerts
+        return [
+            Alert(
+                t_s=float(a["t_s"][i]),
+                t_emit_s=float(a["t_emit_s"][i]),
+                distance_m=opt(a["distance_m"][i]),
+                time_to_arrival_s=opt(a["time_to_arrival_s"][i]),
+                severity_px=float(a["severity_px"][i]),
+                height_mm=opt(a["height_mm"][i]),
+                side=Side(int(a["side"][i])),
+                confidence=float(a["confidence"][i]),
+                mode=FusionMode(int(a["mode"][i])),
+            )
+            for i in range(a["t_s"].size)
+        ]
+
+    def save(self, path: Path) -> None:
+        """Write the trace as .npz (atomically: a killed run leaves no half file)."""
+        arrays: dict[str, NDArray[Any]] = {f"col_{k}": v for k, v in self.columns.items()}
+        arrays |= {f"alert_{k}": v for k, v in self.alerts.items()}
+        arrays |= {f"event_{k}": v for k, v in self.events.items()}
+        arrays["seconds"] = np.asarray(self.seconds)
+        arrays["method"] = np.asarray(self.method)
+        tmp = path.with_name(path.name + ".tmp.npz")
+        savez: Any = np.savez_compressed  # numpy's stub types **kwds as allow_pickle
+        savez(tmp, **arrays)
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, path: Path) -> Trace:
+        try:
+            with np.load(path, allow_pickle=False) as npz:
+                data = {k: npz[k] for k in npz.files}
+        except (OSError, ValueError) as exc:
+            raise InputDataError(f"{path}: not a readable trace ({exc})") from None
+
+        def part(prefix: str) -> dict[str, NDArray[Any]]:
+            return {k[len(prefix) :]: v for k, v in data.items() if k.startswith(prefix)}
+
+        return cls(
+            method=str(data["method"]),
+            columns=part("col_"),
+            alerts=part("alert_"),
+            events=part("event_"),
+            seconds=float(data["seconds"]),
+        )
+
+
+class _TraceRecorder:
+    """Collects `FrameResult`s of one pipeline into a `Trace` (one append per frame)."""
+
+    def __init__(self, method: str, t0: float) -> None:
+        self.method = method
+        self.t0 = t0
+        self.rows: dict[str, list[float]] = {c: [] for c in (*FLOAT_COLUMNS, *INT_COLUMNS)}
+        self.alerts: dict[str, list[float]] = {c: [] for c in (*ALERT_COLUMNS, "side", "mode")}
+        self.events: dict[str, list[float]] = {c: [] for c in EVENT_COLUMNS}
+        self.seconds = 0.0
+
+    def add(self, r: Any) -> None:
+        rows = self.rows
+        rows["t"].append(r.t - self.t0)
+        for c in FLOAT_COLUMNS[1:-4]:
+            rows[c].append(getattr(r, c))
+        box = r.lead_box if r.lead_box is not None else (math.nan,) * 4
+        for c, v in zip(FLOAT_COLUMNS[-4:], box, strict=True):
+            rows[c].append(float(v))
+        rows["mode"].append(int(r.mode))
+        rows["suppressed"].append(int(r.suppressed))
+        rows["lead_found"].append(int(r.lead_found))
+        rows["textured"].append(int(r.textured))
+        self.add_alerts(r.alerts)
+        for e in r.events:
+            self.events["t_s"].append(e.t_s - self.t0)
+            self.events["t_peak_s"].append(e.t_peak_s - self.t0)
+            self.events["t_emit_s"].append(e.t_emit_s - self.t0)
+            self.events["s_px"].append(e.s_px)
+            self.events["lead_distance_m"].append(e.lead_distance_m)
+            self.events["suppressed"].append(int(e.suppressed))
+
+    def add_alerts(self, alerts: Iterable[Any]) -> None:
+        for a in alerts:
+            for c in ALERT_COLUMNS:
+                v = getattr(a, c)
+                v = math.nan if v is None else float(v)
+                if c in ("t_s", "t_emit_s"):
+                    v -= self.t0
+                self.alerts[c].append(v)
+            self.alerts["side"].append(int(a.side))
+            self.alerts["mode"].append(int(a.mode))
+
+    def trace(self) -> Trace:
+        cols: dict[str, NDArray[Any]] = {
+            c: np.asarray(self.rows[c], dtype=np.float64) for c in FLOAT_COLUMNS
+        }
+        cols |= {c: np.asarray(self.rows[c], dtype=np.int64) for c in INT_COLUMNS}
+        return Trace(
+            method=self.method,
+            columns=cols,
+            alerts={k: np.asarray(v, dtype=np.float64) for k, v in self.alerts.items()},
+            events={k: np.asarray(v, dtype=np.float64) for k, v in self.events.items()},
+            seconds=self.seconds,
+        )
+
+
+# -- recordings ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RecordingJob:
+    """One recording of the evaluation: its scenario, where it lives, where its traces go."""
+
+    dataset: str  #: data set name (``wild``, ``texture-loss``, ``controlled``, ...)
+    name: str  #: recording name within the data set
+    scenario: ScenarioConfig
+    root: Path  #: the run folder; recording in ``data/<dataset>/<name>``
+    #: the simulator's source digest, taken when the job is made (in the parent process)
+    sim: str = field(default_factory=lambda: simulator_source_digest(), compare=False)
+
+    @property
+    def digest(self) -> str:
+        return scenario_digest(self.scenario, self.sim)
+
+    @property
+    def folder(self) -> Path:
+        return self.root / "data" / self.dataset / self.name
+
+    @property
+    def trace_dir(self) -> Path:
+        return self.root / "traces" / self.dataset / self.name
+
+    @property
+    def key(self) -> str:
+        return f"{self.dataset}/{self.name}"
+
+    @property
+    def n_frames(self) -> int:
+        return round(self.scenario.motion.duration_s * self.scenario.camera.fps)
+
+    @property
+    def cost(self) -> float:
+        """Relative cost (frames x pixels^0.5), to schedule the longest jobs first."""
+        cam = self.scenario.camera
+        return self.n_frames * math.sqrt(cam.width * cam.height)
+
+
+_META = "eval_recording.json"
+
+
+def recording_is_current(job: RecordingJob) -> bool:
+    """The folder holds a complete recording of exactly this scenario and simulator."""
+    try:
+        meta = json.loads((job.folder / _META).read_text())
+    except (OSError, json.JSONDecodeError):
+        return False
+    return bool(meta.get("scenario_digest") == job.digest)
+
+
+def ensure_recording(job: RecordingJob) -> float:
+    """Simulate the recording unless it is current; returns the seconds spent (0: reused)."""
+    if recording_is_current(job):
+        return 0.0
+    from roadpreview.sim.recording import write_recording
+
+    t0 = time.perf_counter()
+    (job.folder / _META).unlink(missing_ok=True)
+    write_recording(job.scenario, job.folder)
+    meta = {"scenario_digest": job.digest, "dataset": job.dataset}
+    (job.folder / _META).write_text(json.dumps(meta, indent=1))
+    return time.perf_counter() - t0
+
+
+# -- running the methods ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class MethodSet:
+    """The pipelines to run: one configuration per method, and the reference method
+    whose pipeline runs the vision front end."""
+
+    configs: dict[str, PipelineConfig]
+    reference: str = REFERENCE_METHOD
+    #: method -> std for estimates without one (`MethodSpec.nan_std_rad`)
+    nan_std: dict[str, float] = field(default_factory=dict)
+    #: the pipeline's source digest, taken once when the set is built, so that every
+    #: worker of a run and the loading afterwards agree even if the source changes meanwhile
+    source: str = field(default_factory=lambda: pipeline_source_digest())
+
+    def __post_init__(self) -> None:
+        if self.reference not in self.configs:
+            raise InputDataError(
+                f"methods: the reference method {self.reference!r} is not among "
+                f"{list(self.configs)}"
+            )
+
+    @classmethod
+    def build(
+        cls,
+        base: PipelineConfig,
+        specs: Mapping[str, MethodSpec],
+        reference: str = REFERENCE_METHOD,
+    ) -> MethodSet:
+        """Each method's configuration derived from ``base`` (`method_config`)."""
+        return cls(
+            configs={m: method_config(base, spec) for m, spec in specs.items()},
+            reference=reference,
+            nan_std={m: s.nan_std_rad for m, s in specs.items() if s.nan_std_rad is not None},
+        )
+
+    def subset(self, names: Iterable[str]) -> MethodSet:
+        """These methods and the reference."""
+        keep = set(names) | {self.reference}
+        return MethodSet(
+            {m: c for m, c in self.configs.items() if m in keep},
+            self.reference,
+            {m: v for m, v in self.nan_std.items() if m in keep},
+            self.source,
+        )
+
+
+def trace_keys(methods: MethodSet, job: RecordingJob) -> dict[str, str]:
+    """Cache key per method: its configuration, the reference's (it drives the vision),
+    the scenario, the package version and the pipeline's source code."""
+    common = {
+        "format": TRACE_FORMAT,
+        "version": __version__,
+        "source": methods.source,
+        "scenario": job.digest,
+        "reference": to_mapping(methods.configs[methods.reference]),
+    }
+    return {
+        m: _digest({**common, "method": to_mapping(cfg), "nan_std": methods.nan_std.get(m)})
+        for m, cfg in methods.configs.items()
+    }
+
+
+def trace_path(job: RecordingJob, method: str, key: str) -> Path:
+    return job.trace_dir / f"{method}-{key}.npz"
+
+
+def run_methods(folder: Path, methods: MethodSet) -> dict[str, Trace]:
+    """Every method over one recording folder, sharing the reference's vision pass."""
+    from roadpreview.pipeline.core import Pipeline
+    from roadpreview.pipeline.replay import ReplayInputs
+    from roadpreview.pipeline.sources import CAN, CanSource, VideoSource, merge_streams
+
+    inputs = ReplayInputs.from_recording(folder)
+    start = float(inputs.video_start_s or 0.0)
+    reference = methods.reference
+    order = [reference, *(m for m in methods.configs if m != reference)]
+    pipes = {m: Pipeline(inputs.camera, methods.configs[m]) for m in order}
+    for m, std in methods.nan_std.items():
+        pipes[m].pitch = NanStdFallback(pipes[m].pitch, std)
+    ref = pipes[reference]
+    recorders = {m: _TraceRecorder(m, start) for m in order}
+    video = VideoSource(inputs.video, start_s=start, frames_csv=inputs.frames_csv)
+    if video.size != inputs.camera.size:
+        raise InputDataError(
+            f"{inputs.video}: frames are {video.size[0]}x{video.size[1]} but the camera "
+            f"calibration is for {inputs.camera.width}x{inputs.camera.height}"
+        )
+    sources: list[Any] = [video, *(CanSource(p) for p in inputs.can_logs)]
+    vision_s = 0.0
+    last_t = -math.inf
+    clock = time.perf_counter
+    for t, kind, payload in merge_streams(sources):
+        if kind == CAN:
+            for p in pipes.values():
+                p.push_can(payload)
+            continue
+        if t <= last_t:
+            log.warning("%s: frame at %.6f s is not after the previous one; skipped", folder, t)
+            continue
+        last_t = t
+        c0 = clock()
+        # exactly Pipeline.push_frame, split so that every method sees this FrameVision
+        fv = ref.vision.process(t, payload, pitch_rad=ref.pitch_rad)
+        vision_s += clock() - c0
+        for m, p in pipes.items():
+            c1 = clock()
+            r = p.push_vision(t, fv)
+            rec = recorders[m]
+            rec.seconds += clock() - c1
+            rec.add(r)
+    if not recorders[reference].rows["t"]:
+        raise InputDataError(f"{inputs.video}: no frame could be read")
+    for m, p in pipes.items():
+        recorders[m].add_alerts(p.finish())
+    for rec in recorders.values():  # the shared vision step, split evenly
+        rec.seconds += vision_s / len(recorders)
+    return {m: recorders[m].trace() for m in order}
+
+
+@dataclass(frozen=True)
+class RecordingOutcome:
+    """What one task did (for the progress line and the report's timings)."""
+
+    key: str
+    frames: int
+    generate_s: float  #: 0: the recording was reused
+    evaluate_s: float  #: 0: every trace came from the cache
+    methods_run: tuple[str, ...]
+    method_seconds: dict[str, float] = field(default_factory=dict)
+    generate_cpu_s: float = 0.0  #: CPU time of the simulation (load-independent)
+    evaluate_cpu_s: float = 0.0  #: CPU time of the methods
+
+    @property
+    def fps(self) -> float:
+        return self.frames / self.evaluate_s if self.evaluate_s > 0 else math.nan
+
+
+def process_recording(
+    job: RecordingJob, methods: MethodSet, *, fresh: bool = False
+) -> RecordingOutcome:
+    """Simulate the recording if needed, then run the methods whose trace is not cached
+    (with the reference, which drives the vision) and store their traces."""
+    c0 = time.process_time()
+    gen_s = ensure_recording(job)
+    gen_cpu = time.process_time() - c0 if gen_s > 0 else 0.0
+    keys = trace_keys(methods, job)
+    missing = [m for m in methods.configs if fresh or not trace_path(job, m, keys[m]).is_file()]
+    if not missing:
+        return RecordingOutcome(job.key, job.n_frames, gen_s, 0.0, (), generate_cpu_s=gen_cpu)
+    t0 = time.perf_counter()
+    c0 = time.process_time()
+    traces = run_methods(job.folder, methods.subset(missing))
+    eval_s = time.perf_counter() - t0
+    eval_cpu = time.process_time() - c0
+    job.trace_dir.mkdir(parents=True, exist_ok=True)
+    for m, tr in traces.items():
+        for old in job.trace_dir.glob(f"{m}-*.npz"):  # stale keys of this method
+            old.unlink()
+        tr.save(trace_path(job, m, keys[m]))
+    return RecordingOutcome(
+        job.key,
+        len(traces[methods.reference]),
+        gen_s,
+        eval_s,
+        tuple(traces),
+        {m: tr.seconds for m, tr in traces.items()},
+        generate_cpu_s=gen_cpu,
+        evaluate_cpu_s=eval_cpu,
+    )
+
+
+def load_traces(job: RecordingJob, methods: MethodSet) -> dict[str, Trace]:
+    """The cached traces of a processed recording, one per method."""
+    keys = trace_keys(methods, job)
+    out = {}
+    for m in methods.configs:
+        path = trace_path(job, m, keys[m])
+        if not path.is_file():
+            raise OperationError(f"{path}: no trace (run process_recording first)")
+        out[m] = Trace.load(path)
+    return out
+
+
+def _worker_init() -> None:
+    """One thread per worker: the pool already uses the cores."""
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = "1"
+    import cv2
+
+    cv2.setNumThreads(1)
+    logging.getLogger("roadpreview").setLevel(logging.ERROR)
+
+
+def process_all(
+    jobs: Sequence[RecordingJob],
+    methods: MethodSet,
+    *,
+    workers: int = 2,
+    fresh: bool = False,
+    progress: Callable[[int, int, RecordingOutcome], None] | None = None,
+) -> list[RecordingOutcome]:
+    """`process_recording` for every job, longest first, in ``workers`` processes
+    (in this process when ``workers`` is 1). Returns the outcomes in the jobs' order."""
+    keys = [j.key for j in jobs]
+    if len(set(keys)) != len(keys):
+        raise InputDataError("process_all: two jobs share a recording folder")
+    order = sorted(range(len(jobs)), key=lambda i: -jobs[i].cost)
+    outcomes: dict[int, RecordingOutcome] = {}
+    if workers <= 1:
+        for n, i in enumerate(order, start=1):
+            outcomes[i] = process_recording(jobs[i], methods, fresh=fresh)
+            if progress:
+                progress(n, len(jobs), outcomes[i])
+        return [outcomes[i] for i in range(len(jobs))]
+    # the environment is inherited by the spawned workers before numpy loads there
+    saved = {v: os.environ.get(v) for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+    for v in saved:
+        os.environ[v] = "1"
+    try:
+        with ProcessPoolExecutor(
+            max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init
+        ) as pool:
+            futures = {
+                pool.submit(process_recording, jobs[i], methods, fresh=fresh): i for i in order
+            }
+            for n, fut in enumerate(as_completed(futures), start=1):
+                i = futures[fut]
+                outcomes[i] = fut.result()
+                if progress:
+                    progress(n, len(jobs), outcomes[i])
+    finally:
+        for v, old in saved.items():
+            if old is None:
+                os.environ.pop(v, None)
+            else:
+                os.environ[v] = old
+    return [outcomes[i] for i in range(len(jobs))]
+
+
+__all__ = [
+    "MethodSet",
+    "RecordingJob",
+    "RecordingOutcome",
+    "Trace",
+    "ensure_recording",
+    "load_traces",
+    "process_all",
+    "process_recording",
+    "run_methods",
+]

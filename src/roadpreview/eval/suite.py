@@ -1,0 +1,238 @@
+"""One evaluation run: simulate what the plan needs, run every method over it, run the
+experiments, write ``results.json`` (and the report, `roadpreview.eval.report`).
+
+    results = run_evaluation(EvalPlan.quick(), "runs/eval-quick", jobs=2)
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import platform
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from roadpreview import __version__
+from roadpreview.configtools import from_mapping, to_mapping
+from roadpreview.errors import ConfigError
+from roadpreview.eval import experiments as ex
+from roadpreview.eval.methods import METHODS, REFERENCE_METHOD, select_methods
+from roadpreview.eval.plan import EXPERIMENTS, EvalPlan
+from roadpreview.eval.runner import MethodSet, RecordingOutcome, process_all
+from roadpreview.fusion import BACKENDS
+from roadpreview.pipeline.config import PipelineConfig
+from roadpreview.pitch import ESTIMATORS
+
+Progress = Callable[[str], None]
+
+
+@dataclass
+class EvalResults:
+    """Everything a run measured (JSON-ready in ``data``) and where it went."""
+
+    out: Path
+    data: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def figures_dir(self) -> Path:
+        return self.out / "figures"
+
+    def save(self) -> Path:
+        path = self.out / "results.json"
+        path.write_text(json.dumps(_clean(self.data), indent=1))
+        return path
+
+    @classmethod
+    def load(cls, out: str | Path) -> EvalResults:
+        out = Path(out)
+        return cls(out, json.loads((out / "results.json").read_text()))
+
+
+def _clean(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if hasattr(x, "item") and callable(x.item):  # numpy scalars
+        return _clean(x.item())
+    return x
+
+
+def component_settings(
+    registry: Mapping[str, tuple[str, str, str | None]],
+    name: str,
+    options: Mapping[str, Any],
+    config_module: str | None = None,
+) -> dict[str, Any]:
+    """Every setting of a registered component (its config dataclass with ``options``
+    applied, defaults included), for the report."""
+    module_name, _, cfg_name = registry[name]
+    if cfg_name is None:
+        return {}
+    holder = importlib.import_module(config_module or module_name)
+    cfg = from_mapping(getattr(holder, cfg_name), dict(options), where=name)
+    out: dict[str, Any] = to_mapping(cfg)
+    return out
+
+
+def parse_experiments(text: str | None) -> tuple[str, ...]:
+    """``"e1,e4"`` -> ("e1", "e4"); None or "all": every experiment."""
+    if not text or text == "all":
+        return EXPERIMENTS
+    names = tuple(dict.fromkeys(p.strip().lower() for p in text.split(",") if p.strip()))
+    unknown = [n for n in names if n not in EXPERIMENTS]
+    if unknown:
+        raise ConfigError(f"--experiments: unknown {unknown}; choose from {','.join(EXPERIMENTS)}")
+    return tuple(n for n in EXPERIMENTS if n in names)
+
+
+def run_evaluation(
+    plan: EvalPlan,
+    out: str | Path,
+    *,
+    experiments: Sequence[str] = EXPERIMENTS,
+    jobs: int = 2,
+    base_config: PipelineConfig | None = None,
+    methods: Sequence[str] | None = None,
+    fresh: bool = False,
+    progress: Progress | None = None,
+) -> EvalResults:
+    """Simulate and process the recordings the experiments need, run them, save results."""
+    t_start = time.perf_counter()
+    plan.validate()
+    exps = tuple(e for e in EXPERIMENTS if e in experiments)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    base = base_config or PipelineConfig()
+    specs = select_methods(list(methods) if methods is not None else None)
+    if REFERENCE_METHOD not in specs:
+        specs = {REFERENCE_METHOD: METHODS[REFERENCE_METHOD], **specs}
+    mset = MethodSet.build(base, specs)
+    say = progress or (lambda _msg: None)
+    job_sets = plan.jobs(out, exps)
+    all_jobs = [j for js in job_sets.values() for j in js]
+    say(
+        f"{len(all_jobs)} recordings ({', '.join(f'{k}: {len(v)}' for k, v in job_sets.items())}),"
+        f" {len(mset.configs)} methods, {jobs} worker(s)"
+    )
+
+    def on_done(n: int, total: int, o: RecordingOutcome) -> None:
+        parts = []
+        if o.generate_s > 0:
+            parts.append(f"simulated in {o.generate_s:.1f} s ({o.frames / o.generate_s:.0f} fps)")
+        if o.evaluate_s > 0:
+            parts.append(f"{len(o.methods_run)} methods in {o.evaluate_s:.1f} s ({o.fps:.0f} fps)")
+        say(f"[{n}/{total}] {o.key}: {o.frames} frames, " + (", ".join(parts) or "cached"))
+
+    t_proc = time.perf_counter()
+    outcomes = process_all(all_jobs, mset, workers=jobs, fresh=fresh, progress=on_done)
+    proc_s = time.perf_counter() - t_proc
+
+    data = ex.EvalData(plan=plan, methods=mset, jobs=job_sets)
+    fig_dir = out / "figures"
+    res: dict[str, Any] = {}
+    t_exp = time.perf_counter()
+    if "e4" in exps:
+        res["e4"] = ex.e4_table1(data, fig_dir)
+    thresholds: dict[str, float] | None = None
+    if {"e3", "e5"} & set(exps):
+        thresholds = ex.thresholds_of(data)
+    if "e1" in exps:
+        res["e1"] = ex.e1_signal_vs_distance(data, fig_dir)
+    if "e2" in exps:
+        res["e2"] = ex.e2_ego_bump(data, fig_dir)
+    if "e3" in exps and thresholds is not None:
+        res["e3"] = ex.e3_fpr_vs_rotation(
+            data, fig_dir, thresholds, base.anomaly.detector.threshold_px
+        )
+    if "e5" in exps and thresholds is not None:
+        res["e5"] = {
+            "texture_loss": ex.e5_texture_loss(data, fig_dir, thresholds),
+            "range": ex.e5_range(data, fig_dir),
+            "lead_time": ex.e5_lead_time(data, fig_dir),
+        }
+    exp_s = time.perf_counter() - t_exp
+
+    frames_gen = sum(o.frames for o in outcomes if o.generate_s > 0)
+    frames_eval = sum(o.frames for o in outcomes if o.evaluate_s > 0)
+    method_s: dict[str, float] = {}
+    for o in outcomes:
+        for m, s in o.method_seconds.items():
+            method_s[m] = method_s.get(m, 0.0) + s
+    results = EvalResults(out)
+    results.data = {
+        "plan": plan.as_dict(),
+        "experiments": list(exps),
+        "version": __version__,
+        "python": platform.python_version(),
+        "methods": {
+            m: {
+                "label": specs[m].label,
+                "estimator": specs[m].estimator,
+                "backend": specs[m].backend,
+                "compensated": specs[m].compensated,
+                "nan_std_rad": specs[m].nan_std_rad,
+                "heave": (
+                    bool(mset.configs[m].heave.enabled)
+                    if hasattr(mset.configs[m], "heave")
+                    else None
+                ),
+                "pitch": to_mapping(mset.configs[m].pitch),
+                "fusion": to_mapping(mset.configs[m].fusion),
+                "pitch_settings": component_settings(
+                    ESTIMATORS, specs[m].estimator, mset.configs[m].pitch.options
+                ),
+                "fusion_settings": component_settings(
+                    BACKENDS,
+                    specs[m].backend,
+                    mset.configs[m].fusion.options,
+                    "roadpreview.fusion.config",
+                ),
+            }
+            for m in mset.configs
+        },
+        "detector": to_mapping(base.anomaly.detector),
+        "alert": to_mapping(base.anomaly.alert),
+        "vision": to_mapping(base.vision),
+        "heave_settings": to_mapping(base.heave) if hasattr(base, "heave") else None,
+        "datasets": {
+            name: {
+                "recordings": [j.name for j in js],
+                "seeds": [j.scenario.seed for j in js],
+                "size": [js[0].scenario.camera.width, js[0].scenario.camera.height] if js else None,
+                "duration_s": [j.scenario.motion.duration_s for j in js],
+                "frames": sum(j.n_frames for j in js),
+            }
+            for name, js in job_sets.items()
+        },
+        "timing": {
+            "wall_s": time.perf_counter() - t_start,
+            "processing_wall_s": proc_s,
+            "experiments_wall_s": exp_s,
+            "workers": jobs,
+            "frames_simulated": frames_gen,
+            "frames_evaluated": frames_eval,
+            "simulate_wall_s": sum(o.generate_s for o in outcomes),
+            "evaluate_wall_s": sum(o.evaluate_s for o in outcomes),
+            "simulate_cpu_s": sum(o.generate_cpu_s for o in outcomes),
+            "evaluate_cpu_s": sum(o.evaluate_cpu_s for o in outcomes),
+            "simulate_cpu_ms_per_frame": 1000 * sum(o.generate_cpu_s for o in outcomes) / frames_gen
+            if frames_gen
+            else None,
+            "evaluate_cpu_ms_per_frame": 1000
+            * sum(o.evaluate_cpu_s for o in outcomes)
+            / frames_eval
+            if frames_eval
+            else None,
+            "method_cpu_s": method_s,
+        },
+        "results": res,
+    }
+    results.save()
+    return results

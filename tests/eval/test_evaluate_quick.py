@@ -1,0 +1,100 @@
+"""``roadpreview evaluate --quick`` end to end: the orderings the method predicts where
+they are clear, the s(d) fit, and the report.
+
+The quick configuration is small by design (a few short drives at 640x360); the
+orderings checked here are the ones its data set makes clear, not the full
+evaluation's numbers.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from roadpreview.cli.main import main
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    root = tmp_path_factory.mktemp("evaluate-quick")
+    report = root / "docs" / "evaluation.md"
+    rc = main(["evaluate", "--quick", "--out", str(root / "run"), "--report", str(report)])
+    assert rc == 0
+    results = json.loads((root / "run" / "results.json").read_text())
+    return {"root": root, "report": report, "results": results}
+
+
+def test_compensation_beats_no_compensation_on_the_hard_subset(quick: dict[str, Any]) -> None:
+    e4 = quick["results"]["results"]["e4"]
+    hard = {m: r["subsets"]["hard"] for m, r in e4["methods"].items()}
+    assert hard["uncompensated"]["n_pos"] > 0
+    assert hard["uncompensated"]["n_neg"] > 0
+    best_compensated = max(hard["fused-kalman"]["auc"], hard["visual"]["auc"])
+    assert best_compensated > hard["uncompensated"]["auc"]
+
+
+def test_fused_beats_visual_only_when_texture_is_lost(quick: dict[str, Any]) -> None:
+    tl = quick["results"]["results"]["e5"]["texture_loss"]["methods"]
+    # the gyro bridges fog, tunnel and night; the visual chain holds its last value
+    # (what the 1 s detector window sees)
+    for fused in ("fused-kalman", "fused-fg"):
+        assert tl[fused]["pitch_rms_hp_inside_deg"] < tl["visual"]["pitch_rms_hp_inside_deg"]
+    # and the drift over each segment, for the better of the two back ends
+    best = min(tl[m]["pitch_rms_aligned_inside_deg"] for m in ("fused-kalman", "fused-fg"))
+    assert best < tl["visual"]["pitch_rms_aligned_inside_deg"]
+
+
+def test_signal_falls_with_distance(quick: dict[str, Any]) -> None:
+    e1 = quick["results"]["results"]["e1"]["methods"]
+    for m in ("fused-kalman", "visual", "uncompensated"):
+        assert e1[m]["alpha"] > 0, m
+    # on the smooth controlled road the compensated fit explains the crossings well
+    assert e1["fused-kalman"]["r2"] > 0.5
+
+
+def test_report_has_table1_and_figures(quick: dict[str, Any]) -> None:
+    report: Path = quick["report"]
+    text = report.read_text()
+    assert "QUICK CONFIGURATION" in text
+    assert "## E4: the paper's Table I" in text
+    labels = {m["label"] for m in quick["results"]["methods"].values()}
+    assert len(labels) == 6
+    table_lines = [line for line in text.splitlines() if line.startswith("| ")]
+    for label in labels:
+        assert any(line.startswith(f"| {label} |") for line in table_lines), label
+    figures = sorted((report.parent / "eval").glob("*.png"))
+    names = {f.name for f in figures}
+    assert {
+        "e1_signal_vs_distance.png",
+        "e2_ego_bump.png",
+        "e3_fpr_vs_rotation.png",
+        "e4_roc.png",
+        "e5_texture_loss.png",
+        "e5_range.png",
+        "e5_lead_time.png",
+    } <= names
+    for name in names:
+        assert f"](eval/{name})" in text, name
+
+
+def test_a_second_run_reuses_everything(
+    quick: dict[str, Any], capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = quick["root"] / "run"
+    rc = main(["evaluate", "--quick", "--out", str(run), "--experiments", "e4", "--jobs", "1"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "cached" in out
+    assert "simulated" not in out
+    assert "Table I" in out
+
+
+def test_bad_experiment_name_is_a_clear_error(capsys: pytest.CaptureFixture[str]) -> None:
+    rc = main(["evaluate", "--quick", "--experiments", "e9"])
+    assert rc == 1
+    assert "e9" in capsys.readouterr().err
