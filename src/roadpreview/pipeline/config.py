@@ -43,6 +43,15 @@ class FusionStageConfig:
         help="filterpy Kalman filter by default",
     )
     options: dict[str, Any] = field(default_factory=dict)
+    horizon_highpass_s: float = param(
+        3.0,
+        unit="s",
+        gt=0.0,
+        le=60.0,
+        help="the vision's horizon uses the fused pitch minus its low-pass over this time"
+        " constant: the slow part is the road's grade (and start-up drift), which the lead,"
+        " on the same road 5-40 m ahead, shares; bump pitching is 0.5-2 Hz",
+    )
 
 
 @dataclass(frozen=True)

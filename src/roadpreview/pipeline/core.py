@@ -222,6 +222,9 @@ class Pipeline:
         self._speed = _Speed()
         self._key_index = -1
         self._phi = 0.0
+        self._phi_slow = math.nan  # low-pass of the fused pitch (horizon_highpass_s)
+        self._phi_slow_t = math.nan
+        self._horizon_pitch = 0.0
         self._last_gyro_t = -math.inf
         self.frames = 0
         self.alerts_sent = 0
@@ -255,12 +258,14 @@ class Pipeline:
     # -- the frame step -----------------------------------------------------------------
     def push_frame(self, t: float, frame: Any) -> FrameResult:
         """Process one camera frame taken at ``t`` (BGR uint8; None or garbage: no target)."""
-        return self.push_vision(t, self.vision.process(t, frame, pitch_rad=self._phi))
+        return self.push_vision(t, self.vision.process(t, frame, pitch_rad=self.pitch_rad))
 
     @property
     def pitch_rad(self) -> float:
-        """The fused pitch of the last frame (0 before the first): the vision's horizon."""
-        return self._phi
+        """The camera's pitch relative to the road for the vision's horizon (0 before the
+        first frame): the fused pitch of the last frame high-passed (``fusion.
+        horizon_highpass_s``), since the slow part is the grade the lead shares."""
+        return self._horizon_pitch
 
     @property
     def last_gyro_t(self) -> float:
@@ -297,6 +302,7 @@ class Pipeline:
         fused: FusedPitch = self.fusion.estimate(t)
         phi = fused.phi if math.isfinite(fused.phi) else 0.0
         self._phi = phi
+        self._update_horizon(t, phi)
 
         lead = fv.lead
         f = self.camera.fy
@@ -377,6 +383,18 @@ class Pipeline:
         offset = fused.time_offset if math.isfinite(fused.time_offset) else 0.0
         est = self.heave.at(t + offset)
         return est.dz_m, self._heave_term.update(t, est, distance_m, target_changed)
+
+    def _update_horizon(self, t: float, phi: float) -> None:
+        """First-order low-pass of φ (exact for any frame interval); horizon = φ - low-pass."""
+        if not math.isfinite(self._phi_slow) or not t > self._phi_slow_t:
+            if not math.isfinite(self._phi_slow):
+                self._phi_slow = phi
+            self._phi_slow_t = t if math.isfinite(t) else self._phi_slow_t
+        else:
+            a = 1.0 - math.exp(-(t - self._phi_slow_t) / self.config.fusion.horizon_highpass_s)
+            self._phi_slow += a * (phi - self._phi_slow)
+            self._phi_slow_t = t
+        self._horizon_pitch = phi - self._phi_slow
 
     def finish(self) -> list[Alert]:
         """End of input: alerts for events still held by the non-maximum suppression."""
