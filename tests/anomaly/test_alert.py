@@ -51,7 +51,7 @@ def test_a_bump_of_known_height_at_known_distance(make_trajectory: Any) -> None:
     f, delta, d, v = 1000.0, 0.06, 20.0, 10.0
     t = np.arange(180) / 30.0
     y = np.where(t >= 2.0, 380.0 - f * delta / d, 380.0)
-    det = WindowedStdDetector(DetectorConfig(detrend=False))
+    det = WindowedStdDetector(DetectorConfig(detrend=False, emit="peak"))
     run = det.run(make_trajectory(t, y, distance_m=d, speed_mps=v))
     [event] = run.alerts
     alert = AlertBuilder(signal=SignalModel(focal_px=f, alpha=0.5)).build(event)

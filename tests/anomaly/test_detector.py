@@ -25,7 +25,7 @@ from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.fusion.mode import FusionMode
 
 #: the paper's s (eq. 1): the plain std of the window, no detrending
-PAPER = DetectorConfig(detrend=False)
+PAPER = DetectorConfig(detrend=False, emit="peak")
 
 
 def _step_s(a_px: float, n_window: int, c: int) -> float:
@@ -118,12 +118,20 @@ def test_nms_gives_one_event_per_bump(make_trajectory: Any, bump: Any) -> None:
     y = 420.0 + rng.normal(0.0, 0.3, len(t))
     for s0 in starts:
         y -= bump(t, s0, 0.5, 5.0)
-    run = WindowedStdDetector().run(make_trajectory(t, y))
+    run = WindowedStdDetector(DetectorConfig(emit="peak")).run(make_trajectory(t, y))
     assert np.count_nonzero(run.s > 1.0) > 10 * len(starts)  # many frames above threshold ...
     assert len(run.events) == len(starts)  # ... one event per bump
     for e, s0 in zip(run.events, starts, strict=True):
         assert s0 <= e.t_s <= s0 + 0.5  # the crossing lies on the bump
         assert e.t_emit_s - e.t_peak_s == pytest.approx(1.0, abs=0.04)
+    # onset emission: the same bumps, one event each, emitted when s first crosses the
+    # threshold: at least 0.9 s earlier than the confirmed peak (1 s NMS + the rise)
+    onset = WindowedStdDetector(DetectorConfig(emit="onset")).run(make_trajectory(t, y))
+    assert len(onset.events) == len(starts)
+    for e, p, s0 in zip(onset.events, run.events, starts, strict=True):
+        assert s0 <= e.t_emit_s <= s0 + 1.0  # while the bump is still in the window
+        assert e.t_emit_s <= p.t_emit_s - 0.9
+        assert e.s_px < p.s_px  # described at the onset, not the peak
 
 
 def test_nms_window_shorter_than_the_detector_window_is_refused() -> None:

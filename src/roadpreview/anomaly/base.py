@@ -97,7 +97,9 @@ class AnomalyEvent:
     ``t_s`` is the estimated moment the lead crossed the anomaly (the
     steepest change of y_c in the peak's window), ``t_peak_s`` the frame of
     the peak of s and ``t_emit_s`` the frame at which the event was
-    confirmed (``t_peak_s`` + the NMS window). Distance, speed and mode are
+    confirmed (``t_peak_s`` + the NMS window; with ``emit = "onset"`` the
+    "peak" is the frame where s first exceeded the threshold, and the event is
+    emitted there). Distance, speed and mode are
     the values at the crossing. A suppressed event (``suppressed`` truthy)
     is reported for visibility and must not raise an alert.
     """

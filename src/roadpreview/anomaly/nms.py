@@ -65,3 +65,38 @@ class PeakPicker(Generic[P]):
         payload = self._cand[2]
         self._cand = None
         return [payload]
+
+
+class OnsetPicker(Generic[P]):
+    """One event per excursion, reported when it starts: for alerts that must arrive early.
+
+    An eligible (finite) value starts an event when no eligible value came in the
+    ``window_s`` before it; the event is returned at once. Later eligible values
+    within ``window_s`` of the previous one belong to the same excursion. One
+    bump keeps s above threshold for about one detector window, so this gives
+    one event per bump, ``window_s`` plus the rise time earlier than
+    `PeakPicker`, at the price of describing the excursion at its onset (a
+    smaller s than its peak). Same interface as `PeakPicker`.
+    """
+
+    def __init__(self, window_s: float, *, time_tol_s: float = TIME_TOL_S) -> None:
+        self.window_s = float(window_s)
+        self.time_tol_s = time_tol_s
+        self._last_t = -math.inf  # time of the last eligible value
+
+    @property
+    def pending(self) -> bool:
+        """Never: events are returned when they start."""
+        return False
+
+    def push(self, t: float, value: float, describe: Callable[[], P]) -> list[P]:
+        """Next sample (``describe()`` runs when it starts an event); the new events."""
+        if not math.isfinite(value):
+            return []
+        starts = t - self._last_t >= self.window_s - self.time_tol_s
+        self._last_t = t
+        return [describe()] if starts else []
+
+    def flush(self) -> list[P]:
+        """Nothing is held back."""
+        return []

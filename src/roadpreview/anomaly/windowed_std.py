@@ -32,7 +32,7 @@ from roadpreview.anomaly.base import (
     TrajectorySample,
 )
 from roadpreview.anomaly.config import DetectorConfig
-from roadpreview.anomaly.nms import PeakPicker
+from roadpreview.anomaly.nms import OnsetPicker, PeakPicker
 from roadpreview.anomaly.running import WindowedMoments
 from roadpreview.configtools import check_ranges
 from roadpreview.errors import InputDataError
@@ -84,8 +84,8 @@ class WindowedStdDetector:
         check_ranges(self.config, "DetectorConfig")
         self.config.validate()
         self._moments = self._new_moments()
-        self._nms: PeakPicker[AnomalyEvent] = PeakPicker(self.config.nms_window_s)
-        self._nms_suppressed: PeakPicker[AnomalyEvent] = PeakPicker(self.config.nms_window_s)
+        self._nms = self._picker()
+        self._nms_suppressed = self._picker()
         self._last_cause_t = {
             SuppressionReason.LEAD_ACCEL: -math.inf,
             SuppressionReason.DEGRADED: -math.inf,
@@ -95,6 +95,12 @@ class WindowedStdDetector:
         self._fused_t = math.nan  # time of the last FUSED sample
         self._frame: DetectorFrame | None = None
         self._t_last = -math.inf
+
+    def _picker(self) -> PeakPicker[AnomalyEvent] | OnsetPicker[AnomalyEvent]:
+        """Events at their peak (the paper's NMS) or at their onset (``emit``)."""
+        if self.config.emit == "onset":
+            return OnsetPicker(self.config.nms_window_s)
+        return PeakPicker(self.config.nms_window_s)
 
     @property
     def frame(self) -> DetectorFrame | None:
@@ -251,8 +257,8 @@ class WindowedStdDetector:
         empty window, so that the jump between two vehicles' trajectories is not a bump."""
         events = self.flush()
         self._moments = self._new_moments()
-        self._nms = PeakPicker(self.config.nms_window_s)
-        self._nms_suppressed = PeakPicker(self.config.nms_window_s)
+        self._nms = self._picker()
+        self._nms_suppressed = self._picker()
         return events
 
     def flush(self) -> list[AnomalyEvent]:
