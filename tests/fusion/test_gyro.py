@@ -145,3 +145,48 @@ def test_beyond_the_newest_sample_the_last_rate_is_held() -> None:
     mo = g.motion(1.0, 1.05)
     assert mo.dG == pytest.approx(w[-1] * 0.05)
     assert mo.dV == pytest.approx((GyroConfig().hold_rate_std_rad_s * 0.05) ** 2)
+
+
+def test_kept_query_results_equal_fresh_searches() -> None:
+    """`motion3` keeps (G, V, M) and the rate at the end of its interval for the next frame's
+    start, `rate_change` the rate at its start (a key frame's): on a stream with reordered
+    and late samples, gaps and trimming (at the end past the key frame), every answer equals
+    that of a buffer searching afresh (the kept values cleared before each query)."""
+    rng = np.random.default_rng(3)
+    t, w = _samples(4000)
+    t = t + rng.uniform(-0.002, 0.002, t.size)  # jittered stamps: frames fall between knots
+    order = np.arange(t.size)
+    for i in range(0, t.size - 3, 3):  # some samples arrive out of order
+        if rng.random() < 0.1:
+            order[i : i + 3] = order[i : i + 3][::-1]
+    drop = rng.random(t.size) < 0.01  # and some never (short gaps)
+    late = rng.random(t.size) < 0.05  # some 60-90 ms late: sorted in behind kept values
+    arrivals = sorted((k + (rng.integers(6, 10) if late[i] else 0), i) for k, i in enumerate(order))
+    g = GyroHistory(GyroConfig(rate_hz=100.0, history_s=12.0))
+    frame, key, n_checked = 0.5, 0.5, 0
+    for _, i in arrivals:
+        if drop[i]:
+            continue
+        g.push(float(t[i]), float(w[i]))
+        newest = g.newest
+        assert newest is not None
+        while frame + 1 / 30 < newest - 0.05:  # frames as the fusion queries them
+            prev, frame = frame, frame + 1 / 30
+            if frame - key > 2.0 and frame < 25.0:  # then one key until it is trimmed away
+                key = prev
+            fresh = _fresh_copy(g)
+            assert g.motion3(prev, frame) == fresh.motion3(prev, frame)
+            assert g.rate_change(key, frame) == fresh.rate_change(key, frame)
+            g.floor = prev
+            g.trim(prev - 10.0)
+            n_checked += 1
+    assert n_checked > 1100
+
+
+def _fresh_copy(g: GyroHistory) -> GyroHistory:
+    import copy
+
+    f = copy.copy(g)
+    f._s, f._k = list(g._s), list(g._k)
+    f._end_s = f._start_s = math.nan
+    return f

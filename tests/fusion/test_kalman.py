@@ -56,9 +56,10 @@ def test_prediction_equals_filterpy_predict_at_imu_rate() -> None:
 
 @pytest.mark.parametrize("seed", range(4))
 def test_lean_update_equals_filterpy_update(seed: int) -> None:
-    """The Joseph update written out for the scalar relative measurement (h = e0 - e_j) gives
-    filterpy's ``KalmanFilter.update(z, R, H)``: x, P and K to 1e-12 relative, on random
-    states of the filter's size and scales, for every clone slot; P stays exactly symmetric."""
+    """The update written out for the scalar relative measurement (h = e0 - e_j) gives
+    filterpy's ``KalmanFilter.update(z, R, H)`` (Joseph form): x, P and K to 1e-12 relative,
+    on random states of the filter's size and scales, for every clone slot; P stays exactly
+    symmetric."""
     rng = np.random.default_rng(seed)
     f = GyroPitchKalmanFilter()
     n = f.kf.dim_x
@@ -79,12 +80,44 @@ def test_lean_update_equals_filterpy_update(seed: int) -> None:
         h[0, 0], h[0, j] = 1.0, -1.0
         ref.update(z, R=np.array([[R]]), H=h)
 
-        K = f._joseph_update(j, z - (x[0, 0] - x[j, 0]), R)
+        y = z - (x[0, 0] - x[j, 0])
+        K = f._update(j, y, R)[:, n] / y  # the change of x is K y
         p_ref = 0.5 * (ref.P + ref.P.T)
         assert np.abs(f.kf.P - p_ref).max() <= 1e-12 * np.abs(p_ref).max()
         assert np.abs(f.kf.x - ref.x).max() <= 1e-12 * np.abs(ref.x).max()
         assert np.abs(K - ref.K[:, 0]).max() <= 1e-12 * np.abs(ref.K).max()
         assert np.array_equal(f.kf.P, f.kf.P.T)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_step_equals_advance_then_frame(seed: int) -> None:
+    """The per-frame `_bk_step` (prediction and clone written in one pass) leaves exactly the
+    state that `_bk_advance` and then `_bk_frame` leave: with and without gyro (ΔM = 0), with
+    the key frame's clone pinned or not, into every slot."""
+    rng = np.random.default_rng(seed)
+    for dM in (0.0, 0.03):
+        for pinned in (math.nan, 0.1, 0.4):
+            a, b = GyroPitchKalmanFilter(), GyroPitchKalmanFilter()
+            n = a.kf.dim_x
+            m = rng.standard_normal((n, n)) * 1e-3
+            P = m @ m.T
+            x = rng.standard_normal((n, 1)) * 1e-2
+            slots = [float(t) for t in rng.permutation([0.1, 0.2, 0.3, 0.4])]
+            for f in (a, b):
+                f._bk_init(0.0)
+                f.kf.P[:] = P
+                f.kf.x[:] = x
+                f._slots = list(slots)
+                f._pinned = pinned
+                f._t = 0.4
+            dG, dV = float(rng.normal(0.0, 1e-3)), float(rng.uniform(1e-10, 1e-8))
+            a._bk_advance(0.45, dG, dV, dM)
+            a._t = 0.45
+            a._bk_frame(0.45)
+            b._bk_step(0.45, dG, dV, dM)
+            assert b._slots == a._slots
+            assert np.array_equal(b.kf.P, a.kf.P)
+            assert np.array_equal(b.kf.x, a.kf.x)
 
 
 def test_arrays_assigned_to_the_filterpy_filter_are_taken_up() -> None:
@@ -101,7 +134,7 @@ def test_arrays_assigned_to_the_filterpy_filter_are_taken_up() -> None:
     for f in (a, b):
         f._bk_advance(0.1, 0.001, 1e-9, 0.1)
         f._bk_frame(0.1)
-        f._joseph_update(2, 1e-4, 1e-10)
+        f._update(2, 1e-4, 1e-10)
     assert np.array_equal(a.kf.P, b.kf.P)
     assert np.array_equal(a.kf.x, b.kf.x)
     assert b.kf.x[0, 0] != 0.01

@@ -18,14 +18,26 @@ the first frame (``docs/fusion.md``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+from typing import Any, Protocol, runtime_checkable
 
 from roadpreview.fusion.mode import FusionMode
 from roadpreview.pitch.base import PitchEstimate
 
 
-@dataclass(frozen=True, slots=True)
+def _slot_setters(cls: type) -> tuple[Callable[[Any, Any], None], ...]:
+    """The slot setters of a dataclass's fields, in field order.
+
+    `VisualPitch` and `FusedPitch` are made once per frame. The ``__init__`` that
+    `dataclass` writes for a frozen class sets each field with ``object.__setattr__``;
+    theirs (``init=False``, written out) calls the slot's own setter instead, which is the
+    same store at half the cost (about 1 µs instead of 2 per object).
+    """
+    return tuple(cls.__dict__[f.name].__set__ for f in fields(cls))
+
+
+@dataclass(frozen=True, slots=True, init=False)
 class VisualPitch:
     """A visual pitch measurement between two frames, as the vision front end delivers it.
 
@@ -42,6 +54,23 @@ class VisualPitch:
     std: float
     inlier_ratio: float = 1.0
     quality_ok: bool = True
+
+    def __init__(
+        self,
+        t_ref: float,
+        t: float,
+        dphi: float,
+        std: float,
+        inlier_ratio: float = 1.0,
+        quality_ok: bool = True,
+    ) -> None:
+        set_t_ref, set_t, set_dphi, set_std, set_inlier_ratio, set_quality_ok = _VISUAL_SETTERS
+        set_t_ref(self, t_ref)
+        set_t(self, t)
+        set_dphi(self, dphi)
+        set_std(self, std)
+        set_inlier_ratio(self, inlier_ratio)
+        set_quality_ok(self, quality_ok)
 
     @classmethod
     def from_estimate(
@@ -62,7 +91,10 @@ class VisualPitch:
         )
 
 
-@dataclass(frozen=True, slots=True)
+_VISUAL_SETTERS = _slot_setters(VisualPitch)
+
+
+@dataclass(frozen=True, slots=True, init=False)
 class FusedPitch:
     """The fused camera pitch at a frame time.
 
@@ -83,6 +115,29 @@ class FusedPitch:
     time_offset_confidence: float = 0.0
     bias_std: float = math.nan
 
+    def __init__(
+        self,
+        t: float,
+        phi: float,
+        std: float,
+        mode: FusionMode,
+        bias: float = math.nan,
+        time_offset: float = 0.0,
+        time_offset_confidence: float = 0.0,
+        bias_std: float = math.nan,
+    ) -> None:
+        set_t, set_phi, set_std, set_mode, set_bias, set_off, set_conf, set_bias_std = (
+            _FUSED_SETTERS
+        )
+        set_t(self, t)
+        set_phi(self, phi)
+        set_std(self, std)
+        set_mode(self, mode)
+        set_bias(self, bias)
+        set_off(self, time_offset)
+        set_conf(self, time_offset_confidence)
+        set_bias_std(self, bias_std)
+
     @property
     def phi_deg(self) -> float:
         """The pitch in degrees (for display and reports)."""
@@ -91,6 +146,9 @@ class FusedPitch:
     @property
     def std_deg(self) -> float:
         return math.degrees(self.std)
+
+
+_FUSED_SETTERS = _slot_setters(FusedPitch)
 
 
 @runtime_checkable

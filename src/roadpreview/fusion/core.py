@@ -22,8 +22,11 @@ gyro has arrived. Back ends that can copy their state do this exactly
 Cost. Everything here runs once per frame or once per gyro sample, so the hot
 paths (`push_gyro`, `push_visual`, `estimate` with the frame it commits) are
 written for CPython: settings read once into attributes, the gyro's interval
-as a plain tuple (`GyroHistory.motion3`, `_bk_advance`), O(1) checks before
-any search. `roadpreview bench fusion` measures the whole streaming path.
+as a plain tuple (`GyroHistory.motion3`, which keeps the end of one frame's
+interval for the start of the next), one back-end call to move to a frame and
+keep it (`_bk_step`), a measurement's variance as far as it is known computed
+when it arrives, O(1) checks before any search. `roadpreview bench fusion`
+measures the whole streaming path.
 """
 
 from __future__ import annotations
@@ -47,6 +50,10 @@ log = logging.getLogger(__name__)
 
 _INF = math.inf
 _TRUSTED = VisionTrust.TRUSTED
+
+#: a frame's visual measurements: (measurement, its variance before the time-offset term,
+#: None if unusable)
+_Metas = list[tuple[VisualPitch, float | None]]
 
 
 class StreamingFusion(ABC):
@@ -98,11 +105,14 @@ class StreamingFusion(ABC):
         self,
         t: float,
         pitch_rate: float,
-        *,
         roll_rate: float | None = None,
         yaw_rate: float | None = None,
     ) -> bool:
-        """Add a gyro sample (IMU clock). Roll and yaw rates are checked, not yet used."""
+        """Add a gyro sample (IMU clock). Roll and yaw rates are checked, not yet used.
+
+        (Keyword-only in `PitchFusion`; plain parameters here because CPython 3.11 does not
+        specialise calls to functions with keyword-only parameters: 70 ns more per sample.)
+        """
         if roll_rate is None and yaw_rate is None:
             return self.gyro.push(t, pitch_rate)
         for name, v in (("roll_rate", roll_rate), ("yaw_rate", yaw_rate)):
@@ -136,14 +146,30 @@ class StreamingFusion(ABC):
             frames.append(t)  # the usual case of `_add_frame`: the newest frame
         else:
             self._add_frame(t)
-        good = self._is_good(meas)
+        # usable (the front end says so and the numbers make sense)? Then its variance as
+        # far as it is known now: the estimator's std, floored, inflated for few inliers
+        # (the time-offset term is added when the frame is processed); None: unusable
+        var: float | None = None
+        if meas.quality_ok:
+            std, ratio, dphi = meas.std, meas.inlier_ratio, meas.dphi
+            # finite and in range (NaN fails every comparison; an infinite std or ratio is
+            # caught by its bound or by the explicit test)
+            if (
+                -self._max_dphi <= dphi <= self._max_dphi
+                and 0.0 < std < _INF
+                and self._min_inliers <= ratio < _INF
+            ):
+                var = (self._min_std if self._min_std > std else std) ** 2  # max(std, floor)²
+                if ratio < self._low_inliers:
+                    var *= (self._low_inliers / ratio) ** 2
+                self._track_add(t_ref, t, dphi)
+            else:
+                self._unusable(meas)
         metas = self._vis.get(t)
         if metas is None:
-            self._vis[t] = [(meas, good)]
+            self._vis[t] = [(meas, var)]
         else:
-            metas.append((meas, good))
-        if good:
-            self._track_add(t_ref, t, meas.dphi)
+            metas.append((meas, var))
 
     def push_vision_failure(self, t: float, reason: str) -> None:
         """Vision gave nothing usable for the frame at ``t`` (``reason`` for the log)."""
@@ -242,6 +268,14 @@ class StreamingFusion(ABC):
     def _bk_frame(self, t: float) -> None:
         """The current state has reached frame ``t`` (keep it for later relative measurements)."""
 
+    def _bk_step(self, t: float, dG: float, dV: float, dM: float) -> None:
+        """`_bk_advance` to frame ``t`` and `_bk_frame` there: the per-frame call (a back end
+        may override it to do both in one pass). The committed time is set to ``t`` in
+        between, as the caller sets it afterwards."""
+        self._bk_advance(t, dG, dV, dM)
+        self._t = t
+        self._bk_frame(t)
+
     @abstractmethod
     def _bk_visual(self, meas: VisualPitch, var: float) -> bool:
         """Fuse a measurement whose frame is the current state; False if rejected as outlier."""
@@ -292,7 +326,8 @@ class StreamingFusion(ABC):
     def _reset_core(self) -> None:
         cfg = self.config
         self._frames: list[float] = []  # pending frame times, sorted
-        self._vis: dict[float, list[tuple[VisualPitch, bool]]] = {}  # (measurement, usable)
+        # per frame: (measurement, its variance before the time-offset term; None: unusable)
+        self._vis: dict[float, _Metas] = {}
         self._fails: dict[float, str] = {}
         self._started = False
         self._t0 = math.nan
@@ -305,7 +340,7 @@ class StreamingFusion(ABC):
         self._last_query = -math.inf
         self._last_out: FusedPitch | None = None
         # frames committed before the gyro was ready (processed again once it is)
-        self._startup: list[tuple[float, list[tuple[VisualPitch, bool]] | None, str | None]] | None
+        self._startup: list[tuple[float, _Metas | None, str | None]] | None
         self._startup = []
         self._ready = not cfg.alignment.enabled  # the gyro may be fused (offset known)
         self._level = 0.0  # output minus state: level changes being eased in
@@ -405,16 +440,18 @@ class StreamingFusion(ABC):
         frames = self._frames
         if frames and frames[0] <= horizon:
             sup = self._sup
-            n = 0
-            while n < len(frames) and frames[n] <= horizon:
-                self._process_frame(frames[n], sup, True)
-                n += 1
             vis, fails, startup = self._vis, self._fails, self._startup
-            for tf in frames[:n] if n > 1 else (frames[0],):
+            keep = None if ready else startup  # frames to process again once the gyro is ready
+            n = 0
+            for tf in frames:  # (processing a frame leaves the list alone)
+                if tf > horizon:
+                    break
+                self._process_frame(tf, sup, True)
                 meas = vis.pop(tf, None)
                 fail = fails.pop(tf, None) if fails else None
-                if not ready and startup is not None:
-                    startup.append((tf, meas, fail))
+                if keep is not None:
+                    keep.append((tf, meas, fail))
+                n += 1
             del frames[:n]
             if startup is not None and self._t - self._t0 > self._history - 1.0:
                 self._startup = None  # too long ago: the gyro history no longer covers it
@@ -476,11 +513,10 @@ class StreamingFusion(ABC):
             if alive:
                 tau = self._tau
                 dG, dV, dM = self.gyro.motion3(t1 + tau, tf + tau)
-                self._bk_advance(tf, dG, dV, dM)
+                self._bk_step(tf, dG, dV, dM)
             else:
-                self._bk_advance(tf, 0.0, (self._blind * (tf - t1)) ** 2, 0.0)
+                self._bk_step(tf, 0.0, (self._blind * (tf - t1)) ** 2, 0.0)
             self._t = tf
-            self._bk_frame(tf)
         fuse = self._handle_frame_inputs(tf, sup, apply, alive)
         sup.update_mode(alive)
         if apply and self._has_frame_done:
@@ -497,18 +533,15 @@ class StreamingFusion(ABC):
         if metas:
             gyro = self.gyro
             use_gyro = imu_ok and gyro.newest is not None
-            for m, good in metas:
-                if not good:
+            for m, var in metas:
+                if var is None:  # unusable
                     sup.bad_frame(tf)
                     continue
                 if apply:
                     self._bk_note(m)
-                # the measurement's variance: the estimator's, inflated for few inliers, plus
-                # the part of the gyro that a time-offset error would move: (σ_τ Δω)²
-                std = m.std
-                var = (self._min_std if self._min_std > std else std) ** 2  # max(std, floor)
-                if m.inlier_ratio < self._low_inliers:
-                    var *= (self._low_inliers / m.inlier_ratio) ** 2
+                # the measurement's variance (`push_visual`: the estimator's, inflated for few
+                # inliers) plus the part of the gyro that a time-offset error would move:
+                # (σ_τ Δω)²
                 if use_gyro:
                     tau = self._tau
                     var += (self._tau_std * gyro.rate_change(m.t_ref + tau, m.t + tau)) ** 2
@@ -535,28 +568,16 @@ class StreamingFusion(ABC):
             sup.no_news(tf)
         return fuse
 
-    def _is_good(self, m: VisualPitch) -> bool:
-        """Usable: the front end says so and the numbers make sense (else logged)."""
-        if not m.quality_ok:
-            return False
-        # finite and in range (NaN fails every comparison; an infinite std or ratio is caught
-        # by its bound or by the explicit test)
-        std, ratio = m.std, m.inlier_ratio
-        ok = (
-            -self._max_dphi <= m.dphi <= self._max_dphi
-            and 0.0 < std < _INF
-            and self._min_inliers <= ratio < _INF
+    def _unusable(self, m: VisualPitch) -> None:
+        """Log a measurement the front end passed whose numbers make no sense (a failure)."""
+        self.events(
+            "visual-bad",
+            "visual measurement t=%.6f (dphi=%r, std=%r, inliers=%r) unusable: a failure",
+            m.t,
+            m.dphi,
+            m.std,
+            m.inlier_ratio,
         )
-        if not ok:
-            self.events(
-                "visual-bad",
-                "visual measurement t=%.6f (dphi=%r, std=%r, inliers=%r) unusable: a failure",
-                m.t,
-                m.dphi,
-                m.std,
-                m.inlier_ratio,
-            )
-        return ok
 
     def _consistent(self, m: VisualPitch, var: float, imu_ok: bool) -> bool:
         """Re-validation: does the visual increment agree with the gyro over [t_ref, t]?"""

@@ -28,6 +28,7 @@ import bisect
 import logging
 import math
 from dataclasses import dataclass
+from operator import itemgetter
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,6 +42,7 @@ _RECENT = 32  # knots searched first by the per-frame queries (frames are near t
 _MAX_LOGS_PER_KIND = 20
 
 MEASURED, BRIDGED, OUTAGE, START = 0, 1, 2, 3
+_G = itemgetter(0)  # the running integral G of a knot
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,10 +97,20 @@ class GyroHistory:
         self._range = self.cfg.range_rad_s
         self._set_period(1.0 / self.cfg.rate_hz)  # also counts regular intervals
         self.floor = -math.inf  #: stamps at or before this are committed: late samples
-        self.n_accepted = 0
+        # accepted samples: regular ones in completed periods of 64 (`push`), other ones
+        self._n_regular_done = 0
+        self._n_other = 0
         self._n_trimmed = 0  # knots dropped from the front so far (absolute knot numbers)
         # numpy copies of the stamps and integral (first absolute knot, s, G), for integral_at
         self._arrays: tuple[int, NDArray[np.float64], NDArray[np.float64]] | None = None
+        # the end of the interval `motion3` returned last, (G, V, M) and the rate there: the
+        # start of the next frame's interval; and the stamp `rate_change` last found a rate
+        # for as its start (a key frame's, the same for many frames) with that rate. Cleared
+        # when knots are rebuilt (`_insert`); the knots they come from stay otherwise.
+        self._end_s = math.nan
+        self._end = (0.0, 0.0, 0.0, 0.0)
+        self._start_s = math.nan
+        self._start_w = 0.0
 
     # -- input --------------------------------------------------------------------------
     def push(self, t: float, rate: float) -> bool:
@@ -112,13 +124,19 @@ class GyroHistory:
                 s.append(t)
                 k.append((g + rate * dt, v + self._q * dt, m + dt, rate, MEASURED))
                 self.newest = t
-                self.n_accepted += 1
                 n = self._n_regular = self._n_regular + 1
                 self._sum_regular += dt
                 if n == 64:
+                    self._n_regular_done += 64
                     self._set_period(self._sum_regular / 64.0)
                 return True
         return self._push_checked(t, rate)
+
+    @property
+    def n_accepted(self) -> int:
+        """Samples accepted so far (`push` counts them only by the regular-interval count
+        it keeps anyway: one attribute update less per sample)."""
+        return self._n_regular_done + self._n_regular + self._n_other
 
     def _set_period(self, period: float) -> None:
         """The sample period, re-estimated every 64 regular samples (their mean interval)."""
@@ -152,7 +170,7 @@ class GyroHistory:
         s = self._s
         if not s or t > s[-1] + _DUPLICATE_S:
             self._append(t, rate)
-            self.n_accepted += 1
+            self._n_other += 1
             return True
         if abs(t - s[-1]) <= _DUPLICATE_S:
             self.rejects("duplicate", "duplicated stamp t=%.6f: rejected", t)
@@ -205,11 +223,12 @@ class GyroHistory:
         del s[cut:]
         del k[cut:]
         self._arrays = None  # knots after the cut change
+        self._end_s = self._start_s = math.nan
         self.rejects("reordered", "sample at t=%.6f arrived out of order: sorted in", t)
         self._append(t, w)
         for tt, ww in later:
             self._append(tt, ww)
-        self.n_accepted += 1
+        self._n_other += 1
         return True
 
     # -- queries ------------------------------------------------------------------------
@@ -249,16 +268,22 @@ class GyroHistory:
             lo = len(s) - _RECENT
             if lo <= 0 or s[lo] > s1:
                 lo = 0
-            i = bisect.bisect_right(s, s1, lo)
-            a = (s1 - s[i - 1]) / (s[i] - s[i - 1])
-            g0, v0, m0, _, _ = k[i - 1]
-            g1, v1, m1, _, _ = k[i]
-            ga, va, ma = g0 + a * (g1 - g0), v0 + a * (v1 - v0), m0 + a * (m1 - m0)
-            i = bisect.bisect_right(s, s2, i)
+            if s1 == self._end_s:  # the end of the previous interval (the frame before)
+                ga, va, ma, _ = self._end
+            else:
+                i = lo = bisect.bisect_right(s, s1, lo)
+                a = (s1 - s[i - 1]) / (s[i] - s[i - 1])
+                g0, v0, m0, _, _ = k[i - 1]
+                g1, v1, m1, _, _ = k[i]
+                ga, va, ma = g0 + a * (g1 - g0), v0 + a * (v1 - v0), m0 + a * (m1 - m0)
+            i = bisect.bisect_right(s, s2, lo)
             a = (s2 - s[i - 1]) / (s[i] - s[i - 1])
             g0, v0, m0, _, _ = k[i - 1]
             g1, v1, m1, _, _ = k[i]
             gb, vb, mb = g0 + a * (g1 - g0), v0 + a * (v1 - v0), m0 + a * (m1 - m0)
+            # (and the rate there for `rate_change`: that of the first knot at or after s2)
+            self._end_s = s2
+            self._end = (gb, vb, mb, k[i - 1][3] if s[i - 1] == s2 else k[i][3])
             dv = vb - va
             return gb - ga, 0.0 if dv < 0.0 else dv, mb - ma  # max(dv, 0.0)
         g1, v1, m1 = self._at(s1)
@@ -277,17 +302,29 @@ class GyroHistory:
         return self._k[i][3] if i < len(s) else self._k[-1][3]
 
     def rate_change(self, s1: float, s2: float) -> float:
-        """``rate_at(s2) - rate_at(s1)``."""
+        """``rate_at(s2) - rate_at(s1)``. Per frame, s2 is the end of the interval `motion3`
+        returned last and s1 a key frame's stamp, the same from frame to frame: their rates
+        are kept rather than searched again."""
         s = self._s
         if not s:
             return 0.0
         k, n = self._k, len(s)
-        lo = n - _RECENT
-        if lo <= 0 or s[lo] >= s2:
-            lo = 0
-        i = bisect.bisect_left(s, s2, lo)
+        if s2 == self._end_s:
+            w2 = self._end[3]
+        else:
+            lo = n - _RECENT
+            if lo <= 0 or s[lo] >= s2:
+                lo = 0
+            i = bisect.bisect_left(s, s2, lo)
+            w2 = k[i][3] if i < n else k[-1][3]
+        if s1 == self._start_s and s[0] < s1:  # (its knot is still there)
+            return w2 - self._start_w
         j = bisect.bisect_left(s, s1)
-        return (k[i][3] if i < n else k[-1][3]) - (k[j][3] if j < n else k[-1][3])
+        if j == n:
+            return w2 - k[-1][3]  # beyond the newest sample: its rate (not kept, it changes)
+        w1 = self._start_w = k[j][3]
+        self._start_s = s1
+        return w2 - w1
 
     def integral_at(self, t: NDArray[np.float64], since: float) -> NDArray[np.float64]:
         """G at stamps ``t`` (vectorised), using knots from ``since`` on (for the alignment)."""
@@ -307,14 +344,14 @@ class GyroHistory:
             drop = first - c_first  # knots trimmed since
             new = c_first + sa.size - first  # knots already converted
             if new < len(s):
-                sa = np.concatenate((sa[drop:], np.array(s[new:])))
-                g_new = np.fromiter((kn[0] for kn in k[new:]), np.float64, len(s) - new)
+                sa = np.concatenate((sa[drop:], np.fromiter(s[new:], np.float64, len(s) - new)))
+                g_new = np.fromiter(map(_G, k[new:]), np.float64, len(s) - new)
                 ga = np.concatenate((ga[drop:], g_new))
             else:
                 sa, ga = sa[drop:], ga[drop:]
         else:
-            sa = np.array(s, dtype=np.float64)
-            ga = np.fromiter((kn[0] for kn in k), np.float64, len(k))
+            sa = np.fromiter(s, np.float64, len(s))
+            ga = np.fromiter(map(_G, k), np.float64, len(k))
         self._arrays = (first, sa, ga)
         return sa, ga
 

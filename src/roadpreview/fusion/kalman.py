@@ -18,7 +18,7 @@ where the current phi is phi(t); phi(t_ref) is the clone of its key frame,
 so ``H = [1, 0, ..., -1 (slot of t_ref), ...]``. Because the key frame's
 pitch is a state with its own uncertainty and correlation, a new key frame
 (re-anchoring) changes nothing: no step, no double counting. Each update is
-a Joseph-form update with a per-call R (the estimator's std, inflated for few
+a Kalman update with a per-call R (the estimator's std, inflated for few
 inliers, plus the time-offset term), after a Mahalanobis gate on the
 innovation.
 
@@ -42,17 +42,20 @@ allocating arrays:
 
 * prediction, ``F = I - ΔM e0 e1ᵀ``: only row and column 0 and the (phi, b)
   block change, a dozen scalars (``test_prediction_equals_filterpy_predict_at_imu_rate``);
-  single entries are read and written through the ``array('d')``, at a third
-  of the cost of numpy's item access;
-* update, scalar z and ``h = e0 - e_j``: ``u = P hᵀ``, ``S = h u + R``,
-  ``K = u S⁻¹`` as filterpy forms them, and Joseph's
-  ``P <- (I - K h) P (I - K h)ᵀ + K R Kᵀ`` expanded for the rank-one h:
-  ``P + K wᵀ + w Kᵀ`` with ``w = (S/2) K - u``. This is the same polynomial in
-  K (hence Joseph's insensitivity to an error in K, unlike ``P - K S Kᵀ``) and
-  exactly symmetric by construction (the two outer products are the same
-  numbers added in swapped order), so no re-symmetrisation is needed. One
-  broadcast product gives both outer products and K y beside them, and one add
-  updates P and x together: seven small numpy calls in all.
+  single entries are read and written through a memoryview of the
+  ``array('d')``, at a third of the cost of numpy's item access. Per frame the
+  prediction and the clone of the new frame are one pass (`_bk_step`: the new
+  row 0 is written to the clone's row and column as it is computed; the same
+  numbers as `_bk_advance` then `_bk_frame`, ``test_step_equals_advance_then_frame``);
+* update, scalar z and ``h = e0 - e_j``, in Joseph form as the issue asks:
+  ``u = P hᵀ``, ``S = h u + R``, ``K = u S⁻¹`` as filterpy forms them, and
+  ``(I - K h) P (I - K h)ᵀ + K R Kᵀ`` expanded for the rank-one h as
+  ``P + K wᵀ + w Kᵀ`` with ``w = (S/2) K - u``. This is the same polynomial
+  in K as Joseph's (hence its insensitivity to an error in K, unlike
+  ``P - K S Kᵀ``) and symmetric by construction. ``B = [[w, y], [K, 0]]`` and
+  a broadcast product of ``[K; w]`` with it gives ``[K wᵀ | K y]`` and
+  ``[w Kᵀ | 0]``, their sum the change of ``[P | x]`` (exactly symmetric),
+  one add updates P and x together: seven small numpy calls, no allocation.
   ``test_lean_update_equals_filterpy_update`` checks it against
   ``KalmanFilter.update`` on random states (x, P and K to 1e-12 relative).
 
@@ -105,18 +108,24 @@ class GyroPitchKalmanFilter(StreamingFusion):
     def _make_buffers(self) -> None:
         """Work buffers of the update and their views, made once (no allocation per frame)."""
         n = self._n
+        # (i, flat index of P[i, 0], of P[1, i]) for the rows below the bias: `_bk_step`
+        self._below = [(i, i * (n + 1), n + 1 + i) for i in range(2, n)]
         self._s0 = np.empty(())  # a scalar operand (a Python float costs a conversion per call)
         self._u = np.empty(n + 1)  # [P hᵀ, x0 - xj]
         self._un = self._u[:n]
         # B = [[w, y], [K, 0]]: the update's vectors. With A = [K; w] as columns, one product
         # gives MM[0] = [K wᵀ | K y] and MM[1] = [w Kᵀ | 0]; their sum [K wᵀ + w Kᵀ | K y]
-        # (exactly symmetric on the left) is the whole change of [P | x]
+        # (exactly symmetric on the left: K_i w_j + w_i K_j) is the whole change of [P | x]
         B = np.zeros((2, n + 1))
         self._Bf, self._w, self._K = B.reshape(-1), B[0, :n], B[1, :n]
         self._A3, self._B3 = B[::-1, :n, None], B[:, None, :]
         self._MM = np.empty((2, n, n + 1))
         self._MM0, self._MM1 = self._MM[0], self._MM[1]
-        self._dXP = np.empty((n, n + 1))
+        self._dXP = np.empty((n, n + 1))  # the change of [P | x]
+        # single entries through memoryviews (as `_sv`), flat for the change
+        self._s0v: Any = self._s0.data
+        self._Bv: Any = self._Bf.data
+        self._dv: Any = self._dXP.data.cast("B").cast("d")
 
     _VIEWS = (
         "_s0",
@@ -131,10 +140,14 @@ class GyroPitchKalmanFilter(StreamingFusion):
         "_MM0",
         "_MM1",
         "_dXP",
+        "_s0v",
+        "_Bv",
+        "_dv",
         "_xp",
         "_Pa",
         "_xa",
         "_rows",
+        "_sv",
     )
 
     def __getstate__(self) -> dict[str, Any]:
@@ -153,13 +166,17 @@ class GyroPitchKalmanFilter(StreamingFusion):
     def _install(self, st: array[float]) -> None:
         """Make ``st`` (flat, [P | x] row by row: n rows of n + 1) the storage of filterpy's P
         and x: kf.P and kf.x are numpy views of it, so the state is where filterpy keeps it,
-        while Python reads and writes single entries of the array at a third of the cost of
-        numpy's item access (there are some thirty per frame)."""
+        while Python reads and writes single entries through a memoryview of the array
+        (``_sv``) at a third of the cost of numpy's item access (there are some forty per
+        frame; the array's own item assignment parses its argument, the memoryview's
+        converts the float directly, half the cost)."""
         n = self._n
         xp = np.frombuffer(st, dtype=np.float64).reshape(n, n + 1)
         kf = self.kf
         kf.P, kf.x = xp[:, :n], xp[:, n:]
         self._st, self._xp, self._Pa, self._xa = st, xp, kf.P, kf.x
+        # typed Any: typeshed gives memoryview items as int, these are float64
+        self._sv: Any = memoryview(st)
         self._rows = [xp[i] for i in range(n)]  # [P[i, :], x[i]]
 
     def _bind(self) -> None:
@@ -199,7 +216,7 @@ class GyroPitchKalmanFilter(StreamingFusion):
         kf = self.kf
         if kf.P is not self._Pa or kf.x is not self._xa:
             self._bind()
-        st, n = self._st, self._n
+        st, n = self._sv, self._n
         m = n + 1  # P[i, j] = st[i m + j], x[i] = st[i m + n]
         st[n] = st[n] + (dG - dM * st[m + n])  # phi += ΔG - ΔM b
         qb = self._q_bias
@@ -222,25 +239,62 @@ class GyroPitchKalmanFilter(StreamingFusion):
             st[m] = p01
         st[m + 1] = st[m + 1] + qb * (t - self._t)
 
-    def _bk_frame(self, t: float) -> None:
+    def _bk_step(self, t: float, dG: float, dV: float, dM: float) -> None:
+        """`_bk_advance` then `_bk_frame` (the per-frame call) in one pass, the same numbers:
+        the predicted row 0 goes to the new clone's row and column 0 to its column as they
+        are computed."""
+        kf = self.kf
+        if kf.P is not self._Pa or kf.x is not self._xa:
+            self._bind()
+        j = 2 + self._clone_slot(t)
+        st, n = self._sv, self._n
+        m = n + 1  # P[i, j] = st[i m + j], x[i] = st[i m + n]
+        st[n] = st[n] + (dG - dM * st[m + n])  # phi += ΔG - ΔM b
+        qb = self._q_bias
+        if dM != 0.0:
+            p01 = st[1] - dM * st[m + 1]
+            p00 = ((st[0] - dM * st[m]) - dM * p01) + (dV + qb * dM * dM * dM / 3.0)
+            p01 = p01 - qb * dM * dM / 2.0
+            for i, im, i1 in self._below:  # P[0, i] -= ΔM P[1, i]; P[i, 0] and P[i, j] the same
+                v = st[i] - dM * st[i1]
+                st[i] = v
+                st[im] = v
+                st[im + j] = v
+        else:
+            p00 = st[0] + (dV + qb * dM * dM * dM / 3.0)
+            p01 = st[1] - qb * dM * dM / 2.0
+            for _, im, _ in self._below:  # P[i, j] = P[i, 0]
+                st[im + j] = st[im]
+        st[0] = p00
+        st[j] = p00
+        st[1] = p01
+        st[m] = p01
+        st[m + j] = p01
+        st[j * m : j * m + m] = st[0:m]  # row j = row 0 (so P[j, j] = P[0, j] = P[0, 0]), x_j = x_0
+        st[m + 1] = st[m + 1] + qb * (t - self._t)
+
+    def _clone_slot(self, t: float) -> int:
+        """The slot of the clone of frame ``t``: the oldest, except the pinned key frame's."""
         slots = self._slots
-        pinned = self._pinned
-        victim = -1
-        oldest = math.inf
-        for i, ts in enumerate(slots):
-            if ts != pinned and ts < oldest:
-                oldest, victim = ts, i
+        oldest = min(slots)
+        if oldest == self._pinned:  # the key frame's clone (usually the oldest) stays
+            oldest = sorted(slots)[1]  # (slot times are distinct but for the initial -inf)
+        victim = slots.index(oldest)
         slots[victim] = t
-        j = 2 + victim
-        st, n = self._st, self._n
+        return victim
+
+    def _bk_frame(self, t: float) -> None:
+        j = 2 + self._clone_slot(t)
+        st, n = self._sv, self._n
         m = n + 1
         st[j * m : j * m + m] = st[0:m]  # P[j, :] = P[0, :] and x[j] = x[0]
         for i in range(0, n * m, m):  # P[:, j] = P[:, 0], so P[j, j] = P[0, 0]
             st[i + j] = st[i]
 
     def _bk_note(self, meas: VisualPitch) -> None:
-        if meas.t_ref in self._slots:
-            self._pinned = meas.t_ref
+        t_ref = meas.t_ref
+        if t_ref != self._pinned and t_ref in self._slots:  # (a pinned key keeps its slot)
+            self._pinned = t_ref
 
     def _bk_visual(self, meas: VisualPitch, var: float) -> bool:
         z, R = meas.dphi, var
@@ -269,7 +323,7 @@ class GyroPitchKalmanFilter(StreamingFusion):
         if len(last) > 8:
             del last[min(last)]
         j = 2 + slot
-        st, n = self._st, self._n
+        st, n = self._sv, self._n
         m = n + 1
         y = z - (st[n] - st[j * m + n])
         s = st[0] + st[j * m + j] - 2.0 * st[j] + R
@@ -283,48 +337,54 @@ class GyroPitchKalmanFilter(StreamingFusion):
                 abs(y) / math.sqrt(s),
             )
             return False
-        K = self._joseph_update(j, y, R)
-        if self._pinned in slots:  # how far the key frame's estimate moved
-            self._shift += K.item(2 + slots.index(self._pinned)) * y
+        self._update(j, y, R)
+        pinned = self._pinned  # how far the key frame's estimate moved: its row's K y
+        if pinned == slots[slot]:  # (the key measured against, as a rule)
+            self._shift += self._dv[j * m + n]
+        elif pinned in slots:
+            self._shift += self._dv[(2 + slots.index(pinned)) * m + n]
         return True
 
-    def _joseph_update(self, j: int, y: float, R: float) -> Array:
+    def _update(self, j: int, y: float, R: float) -> Array:
         """Joseph-form update with the scalar innovation ``y`` of ``h = e0 - e_j`` and
-        variance ``R`` (filterpy's ``update`` for this h, module docstring); returns K."""
-        u, un, K, w, s0 = self._u, self._un, self._K, self._w, self._s0
-        subtract, multiply, add = np.subtract, np.multiply, np.add
-        subtract(self._rows[0], self._rows[j], u)  # P hᵀ (P symmetric), and x0 - xj
-        S = u.item(0) - u.item(j) + R  # h P hᵀ + R
-        s0[()] = 1.0 / S
-        multiply(un, s0, K)  # K = P hᵀ S⁻¹
-        s0[()] = 0.5 * S
-        multiply(K, s0, w)
-        subtract(w, un, w)  # w = (S/2) K - P hᵀ
-        self._Bf[self._n] = y
+        variance ``R`` (filterpy's ``update`` for this h, module docstring):
+        ``P += K wᵀ + w Kᵀ`` with ``w = (S/2) K - u``, ``x += K y``, ``u = P hᵀ``,
+        ``K = u / S``. Returns the change of [P | x] (its last column is K y)."""
+        u, un, K, w, s0, st = self._u, self._un, self._K, self._w, self._s0, self._sv
+        n = self._n
+        np.subtract(self._rows[0], self._rows[j], u)  # P hᵀ (P symmetric), then x0 - xj
+        jm = j * (n + 1)
+        S = (st[0] - st[jm]) - (st[j] - st[jm + j]) + R  # h P hᵀ + R = u[0] - u[j] + R
+        self._s0v[()] = 1.0 / S
+        np.multiply(un, s0, K)  # K = P hᵀ S⁻¹
+        self._s0v[()] = 0.5 * S
+        np.multiply(K, s0, w)
+        np.subtract(w, un, w)  # w = (S/2) K - P hᵀ
+        self._Bv[n] = y
         dxp = self._dXP
-        multiply(self._A3, self._B3, self._MM)  # [K wᵀ | K y] and [w Kᵀ | 0]
-        add(self._MM0, self._MM1, dxp)  # [K wᵀ + w Kᵀ | K y]
-        add(self._xp, dxp, self._xp)  # P += K wᵀ + w Kᵀ, x += K y
-        return K
+        np.multiply(self._A3, self._B3, self._MM)  # [K wᵀ | K y] and [w Kᵀ | 0]
+        np.add(self._MM0, self._MM1, dxp)  # [K wᵀ + w Kᵀ | K y]
+        np.add(self._xp, dxp, self._xp)  # P += K wᵀ + w Kᵀ, x += K y
+        return dxp
 
     def _bk_output(self) -> tuple[float, float]:
         kf = self.kf
         if kf.P is not self._Pa or kf.x is not self._xa:
             self._bind()
-        return self._st[self._n], self._st[0]
+        return self._sv[self._n], self._sv[0]
 
     def _bk_bias(self) -> tuple[float, float]:
         kf = self.kf
         if kf.P is not self._Pa or kf.x is not self._xa:
             self._bind()
         m = self._n + 1
-        return self._st[m + m - 1], self._st[m + 1]
+        return self._sv[m + m - 1], self._sv[m + 1]
 
     def _bk_output_bias(self) -> tuple[float, float, float, float]:
         kf = self.kf
         if kf.P is not self._Pa or kf.x is not self._xa:
             self._bind()
-        st, n = self._st, self._n
+        st, n = self._sv, self._n
         m = n + 1
         return st[n], st[0], st[m + n], st[m + 1]
 

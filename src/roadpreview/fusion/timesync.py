@@ -15,20 +15,28 @@ than one IMU sample; the peak is refined by a parabola through it and its two
 neighbours. The peak correlation is the confidence. No estimate is made from a
 window that is too short, too flat (no excitation) or whose peak lies on the
 edge of the search range.
+
+Cost (an estimate every `AlignmentConfig.update_period_s`, 10 s of increments
+on 45 lags): the gyro integral is read once per distinct frame time and lag
+(consecutive increments share a frame), time by time so that `np.interp`'s
+search starts next to the point before; the numpy statistics are written as
+their elementary steps (the same operations, so the same numbers, without the
+generic dispatch that was a third of the time at these sizes).
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from roadpreview.fusion.config import AlignmentConfig
 from roadpreview.fusion.gyro import GyroHistory
 
 _MAX_INCREMENT_FRAMES_S = 0.12  # consecutive frames further apart than this give no rate
+_CUT_BLOCK = 256  # expired increments are deleted from the front in blocks of this many
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,7 +51,13 @@ class OffsetEstimate:
 
 
 class VisualRateTrack:
-    """Chains relative visual measurements into frame-to-frame pitch increments."""
+    """Chains relative visual measurements into frame-to-frame pitch increments.
+
+    The increments of the sliding window are ``ta``, ``tb`` (start and end frame times) and
+    ``d`` (pitch change). They are kept in three lists with the index of the oldest one still
+    in the window (`add` runs per measurement: an append and a comparison, no pop), and the
+    expired front is cut off in blocks.
+    """
 
     def __init__(self, window_s: float) -> None:
         self.window_s = window_s
@@ -52,39 +66,79 @@ class VisualRateTrack:
     def reset(self) -> None:
         self._chain: dict[float, float] = {}
         self._last_t = -math.inf
-        # frame-to-frame increments: start time, end time, pitch change
-        self.ta: deque[float] = deque()
-        self.tb: deque[float] = deque()
-        self.d: deque[float] = deque()
+        # frame-to-frame increments: start time, end time, pitch change (from index _head on)
+        self._ta: list[float] = []
+        self._tb: list[float] = []
+        self._d: list[float] = []
+        self._head = 0
 
     def __len__(self) -> int:
-        return len(self.ta)
+        return len(self._ta) - self._head
 
-    def _record(self, ta: float, tb: float, d: float) -> None:
-        self.ta.append(ta)
-        self.tb.append(tb)
-        self.d.append(d)
+    @property
+    def ta(self) -> list[float]:
+        """Start frame times of the increments in the window (a copy)."""
+        return self._ta[self._head :]
+
+    @property
+    def tb(self) -> list[float]:
+        """End frame times of the increments in the window (a copy)."""
+        return self._tb[self._head :]
+
+    @property
+    def d(self) -> list[float]:
+        """Pitch changes of the increments in the window (a copy)."""
+        return self._d[self._head :]
+
+    def arrays(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """``ta``, ``tb`` and ``d`` as numpy arrays (`np.fromiter`: a list of floats is
+        converted faster than by `np.array`, which first inspects every element)."""
+        h = self._head
+        n = len(self._ta) - h
+        return (
+            np.fromiter(self._ta[h:], np.float64, n),
+            np.fromiter(self._tb[h:], np.float64, n),
+            np.fromiter(self._d[h:], np.float64, n),
+        )
 
     def add(self, t_ref: float, t: float, dphi: float) -> None:
         """A trusted-quality measurement; extends the chain and records an increment."""
         chain = self._chain
-        if t_ref in chain:
-            chain[t] = chain[t_ref] + dphi
+        phi_ref = chain.get(t_ref)  # (one dict lookup each: the keys are float frame times)
+        if phi_ref is not None:
+            phi = phi_ref + dphi
         else:  # a key frame the chain does not know: start a new chain there
             chain.clear()
             chain[t_ref] = 0.0
-            chain[t] = dphi
+            phi = dphi
+        chain[t] = phi
         prev = self._last_t
-        if prev < t and prev in chain and t - prev <= _MAX_INCREMENT_FRAMES_S:
-            self._record(prev, t, chain[t] - chain[prev])
+        ta = self._ta
+        if (
+            prev < t
+            and t - prev <= _MAX_INCREMENT_FRAMES_S
+            and (phi_prev := chain.get(prev)) is not None
+        ):
+            ta.append(prev)
+            self._tb.append(t)
+            self._d.append(phi - phi_prev)
         elif t_ref < t and t - t_ref <= _MAX_INCREMENT_FRAMES_S and t_ref != prev:
-            self._record(t_ref, t, dphi)
-        self._last_t = max(self._last_t, t)
-        old = t - self.window_s
-        while self.ta and self.ta[0] < old:
-            self.ta.popleft()
-            self.tb.popleft()
-            self.d.popleft()
+            ta.append(t_ref)
+            self._tb.append(t)
+            self._d.append(dphi)
+        if t > prev:
+            self._last_t = t
+        # drop the increments that started before the window
+        h = self._head
+        if h < len(ta) and ta[h] < t - self.window_s:
+            old = t - self.window_s
+            n = len(ta)
+            while h < n and ta[h] < old:
+                h += 1
+            if h >= _CUT_BLOCK:  # cut the expired front off the lists now and then
+                del ta[:h], self._tb[:h], self._d[:h]
+                h = 0
+            self._head = h
         if len(chain) > 256:  # keep the recent part of the chain and the key
             keep = {k: v for k, v in chain.items() if k >= t - 5.0 or k == t_ref}
             chain.clear()
@@ -98,7 +152,8 @@ class TimeOffsetEstimator:
         self.cfg = cfg
         self.track = VisualRateTrack(cfg.window_s)
         n = round((cfg.max_offset_s - cfg.min_offset_s) / cfg.step_s)
-        self.lags = cfg.min_offset_s + cfg.step_s * np.arange(n + 1)
+        self.lags: NDArray[np.float64] = cfg.min_offset_s + cfg.step_s * np.arange(n + 1.0)
+        self._coarse = self.lags[::4]  # the coarse grid: every 4th lag
 
     def reset(self) -> None:
         self.track.reset()
@@ -109,44 +164,61 @@ class TimeOffsetEstimator:
         newest = gyro.newest
         if newest is None or len(self.track) < cfg.min_increments:
             return None
-        ta = np.array(self.track.ta)
-        tb = np.array(self.track.tb)
-        d = np.array(self.track.d)
+        ta, tb, d = self.track.arrays()
         ok = tb + cfg.max_offset_s <= newest  # the gyro must cover every shifted interval
-        if np.count_nonzero(ok) < cfg.min_increments:
+        n = int(np.add.reduce(ok, dtype=np.intp))  # np.count_nonzero(ok)
+        if n < cfg.min_increments:
             return None
-        ta, tb, d = ta[ok], tb[ok], d[ok]
+        if n < ok.size:  # (as a rule the newest few: then views, not copies)
+            ta, tb, d = (ta[:n], tb[:n], d[:n]) if ok[:n].all() else (ta[ok], tb[ok], d[ok])
         span = tb - ta
         v = d / span
-        # winsorise gross visual errors at 6 MADs (Pearson is not robust)
-        med = float(np.median(v))
-        mad = float(np.median(np.abs(v - med))) * 1.4826 + 1e-12
-        v = np.clip(v, med - 6 * mad, med + 6 * mad)
-        if float(np.std(v)) < cfg.min_rate_std_rad_s:
+        # winsorise gross visual errors at 6 MADs (Pearson is not robust); the numpy
+        # functions are written out as their elementary steps (the same numbers: np.median's
+        # order statistics, np.clip's max-min, np.std's and np.mean's sums), which saves
+        # their generic dispatch, a third of the cost at these sizes
+        med = _median(v)
+        mad = _median(np.abs(v - med)) * 1.4826 + 1e-12
+        v = np.minimum(np.maximum(v, med - 6 * mad), med + 6 * mad)
+        add = np.add.reduce  # (the ndarray.sum method goes through a Python function)
+        vc = v - float(add(v)) / n
+        vv = float(add(np.square(vc)))
+        if math.sqrt(vv / n) < cfg.min_rate_std_rad_s:  # np.std(v)
             return None
-        vc = v - v.mean()
-        vv = float((vc**2).sum())
         since = float(ta[0]) + cfg.min_offset_s
+        # the gyro integral is read at the end of every increment and at the starts that
+        # are not the end of the increment before (consecutive frames share one)
+        new_start = np.empty(n, dtype=bool)
+        new_start[0] = True
+        np.not_equal(ta[1:], tb[:-1], out=new_start[1:])
+        extra = new_start.nonzero()[0]
+        times = np.concatenate((tb, ta[extra]))
+        at_start = np.arange(-1, n - 1)  # where G(ta) is in `times`
+        at_start[extra] = np.arange(n, n + extra.size)
+        span_col = span[:, None]
 
-        def rates_at(lags: np.ndarray) -> np.ndarray:
+        def rates_at(lags: NDArray[np.float64]) -> NDArray[np.float64]:
             """Gyro mean rate over every visual interval shifted by each lag (lags, n)."""
-            lg = lags[:, None]
-            g = gyro.integral_at(np.concatenate([(tb + lg).ravel(), (ta + lg).ravel()]), since)
-            n = lags.size * ta.size
-            return (g[:n] - g[n:]).reshape(lags.size, ta.size) / span
+            # the integral is read time by time, all lags of a time together: successive
+            # points are then a lag step apart, next to the last one found (np.interp
+            # starts its search there), rather than a frame apart
+            g = gyro.integral_at((times[:, None] + lags).ravel(), since)
+            g = g.reshape(times.size, lags.size)
+            rates = (g[:n] - g.take(at_start, axis=0)) / span_col
+            return rates.T.copy()  # (lags, n), laid out (C order) as `corr` reduces it
 
-        def corr(rates: np.ndarray) -> np.ndarray:
-            gc = rates - rates.mean(axis=1, keepdims=True)
-            return (gc @ vc) / (np.sqrt((gc**2).sum(axis=1) * vv) + 1e-300)
+        def corr(rates: NDArray[np.float64]) -> NDArray[np.float64]:
+            gc = rates - add(rates, axis=1, keepdims=True) / n  # rates.mean(axis=1)
+            r: NDArray[np.float64] = (gc @ vc) / (np.sqrt(add(np.square(gc), axis=1) * vv) + 1e-300)
+            return r
 
         # coarse (4 steps) over the whole range, then every step around the coarse peak
-        coarse = self.lags[::4]
-        jc = int(np.argmax(corr(rates_at(coarse))))
+        jc = int(corr(rates_at(self._coarse)).argmax())
         ic = 4 * jc
         lags = self.lags[max(ic - 6, 0) : ic + 7]
         rates = rates_at(lags)
         r = corr(rates)
-        j = int(np.argmax(r))
+        j = int(r.argmax())
         if j == 0 or j == r.size - 1:
             return None  # at the edge of the search range (or of an ambiguous coarse peak)
         r0, rm, rp = float(r[j]), float(r[j - 1]), float(r[j + 1])
@@ -154,15 +226,27 @@ class TimeOffsetEstimator:
         delta = 0.5 * (rm - rp) / curv if curv < 0 else 0.0
         delta = min(max(delta, -0.5), 0.5)
         # precision: least squares in tau of v = g(tau) + c; Var(tau) = s_res² / sum(g'(tau)²)
-        g0 = rates[j] - rates[j].mean()
-        slope = float(np.dot(g0, vc) / (np.dot(g0, g0) + 1e-300))
+        g0 = rates[j] - float(add(rates[j])) / n
+        slope = float(g0.dot(vc) / (g0.dot(g0) + 1e-300))
         res = vc - slope * g0
         dg = (rates[j + 1] - rates[j - 1]) / (2.0 * cfg.step_s)
-        dg = dg - dg.mean()
-        info = float(np.dot(dg, dg)) / max(float(np.mean(res**2)), 1e-300)
+        dg = dg - float(add(dg)) / n
+        info = float(dg.dot(dg)) / max(float(add(np.square(res))) / n, 1e-300)
         return OffsetEstimate(
             offset_s=float(lags[j] + delta * cfg.step_s),
             correlation=r0,
-            n_increments=int(ta.size),
+            n_increments=n,
             std_s=1.0 / math.sqrt(info) if info > 0 else math.inf,
         )
+
+
+def _median(v: NDArray[np.float64]) -> float:
+    """``np.median(v)`` of a finite vector (the same order statistics and mean of the middle
+    two), without its generic machinery."""
+    h = v.size // 2
+    part = v.copy()  # (what np.partition does before the method)
+    if v.size % 2:
+        part.partition(h)
+        return float(part[h])
+    part.partition((h - 1, h))
+    return (float(part[h - 1]) + float(part[h])) / 2
