@@ -90,6 +90,21 @@ class LeadTrackerConfig:
     box_refresh: float = param(
         0.5, ge=0.0, le=1.0, help="weight of a matching detection's box in the tracked box"
     )
+    refresh_size_gate: float = param(
+        0.15,
+        ge=0.0,
+        help="a matching detection whose width differs from the tracked box's by more than this"
+        " fraction is not blended in (the points' own scale change carries the box): a lead"
+        " pitching over a bump swells the motion finder's box by 25-40 % for about a second,"
+        " which the width cue would read as the gap closing by 4-5 m",
+    )
+    refresh_size_persist_s: float = param(
+        1.5,
+        unit="s",
+        gt=0.0,
+        help="a size disagreement that lasts this long is real (the tracked box drifted):"
+        " detections are blended in again",
+    )
     cut_in_confirmations: int = param(
         2, ge=1, help="finder runs that must agree before switching to another vehicle"
     )
@@ -282,6 +297,7 @@ class LeadVehicleTracker:
         self._points: F32 = np.empty((0, 2), np.float32)
         self._n_seeded = 0
         self._box: Box = (0.0, 0.0, 0.0, 0.0)
+        self._size_gated_since = math.nan  # first refresh of a running size disagreement
         self._anchor = (math.nan, math.nan)
         self._anchor_l = (math.nan, math.nan)
         self._anchor_r = (math.nan, math.nan)
@@ -360,6 +376,7 @@ class LeadVehicleTracker:
         self._anchor_l = (float(ml[0]), float(ml[1]))
         self._anchor_r = (float(mr[0]), float(mr[1]))
         self._pending = None
+        self._size_gated_since = math.nan
         return True
 
     # -- per frame --------------------------------------------------------------------
@@ -456,7 +473,7 @@ class LeadVehicleTracker:
         j = int(np.argmax(ious)) if ious else -1
         if j == best and ious[j] >= cfg.match_iou:
             self._pending = None
-            self._refresh(det)
+            self._refresh(det, ctx.t)
             return False
         # the target still tracked competes by the same rule: a detection that is not
         # nearer the centre than it is another vehicle, not a cut-in
@@ -467,7 +484,7 @@ class LeadVehicleTracker:
         ):
             self._pending = None
             if j >= 0 and ious[j] >= cfg.match_iou:
-                self._refresh(detections[j])
+                self._refresh(detections[j], ctx.t)
             return False
         # another vehicle is now nearest the centre (cut-in): confirm before switching
         if self._pending is not None and box_iou(self._pending[0], det.box) >= cfg.match_iou:
@@ -478,15 +495,27 @@ class LeadVehicleTracker:
         if count >= cfg.cut_in_confirmations:
             return self._start(ctx, det)
         if j >= 0 and ious[j] >= cfg.match_iou:
-            self._refresh(detections[j])
+            self._refresh(detections[j], ctx.t)
         return False
 
-    def _refresh(self, det: Detection) -> None:
-        """Blend a matching detection's box into the tracked one (points stay)."""
-        a = self.config.box_refresh
+    def _refresh(self, det: Detection, t: float) -> None:
+        """Blend a matching detection's box into the tracked one (points stay), unless its
+        size disagrees (`LeadTrackerConfig.refresh_size_gate`) for less than
+        `LeadTrackerConfig.refresh_size_persist_s`."""
+        cfg = self.config
+        a = cfg.box_refresh
         box = clip_box(det.box, self.camera.width, self.camera.height)
         if box is None:
             return
+        w_old = self._box[2] - self._box[0]
+        w_new = box[2] - box[0]
+        if w_old > 0.0 and abs(w_new / w_old - 1.0) > cfg.refresh_size_gate:
+            if math.isnan(self._size_gated_since):
+                self._size_gated_since = t
+            if t - self._size_gated_since < cfg.refresh_size_persist_s:
+                return
+        else:
+            self._size_gated_since = math.nan
         o = self._box
         self._box = (
             (1 - a) * o[0] + a * box[0],
