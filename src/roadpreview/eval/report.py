@@ -651,7 +651,8 @@ def _e5_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
     w("")
     w(
         "The product's own alerts (default detector, `threshold_px` = 1.0 px, emitted at "
-        "the onset of the excursion (`emit` = onset), suppression) on the wild set, matched to the lead's crossings as `roadpreview replay "
+        "the onset of the excursion (`emit` = onset), suppression) on the wild set, "
+        "matched to the lead's crossings as `roadpreview replay "
         "--truth` does (crossing within -0.6/+1.2 s of the alert's crossing time). Lead time = "
         "the ego's front axle over the anomaly minus the alert's emission. `uncompensated` "
         "runs in mode DEGRADED, whose events are suppressed by design, so it raises no alert; "
