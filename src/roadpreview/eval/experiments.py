@@ -15,6 +15,7 @@ and writes its figure.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import zlib
@@ -52,7 +53,15 @@ _TRUTH_KEYS = (
     "cam_pitch_rate_rad_s",
     "lead_distance_m",
     "lead_box_px",
+    "lead_rear_px",
+    "cam_z_m",
 )
+
+#: the ceiling's camera heave: its height less its centred running mean over this span (the
+#: road's hills and the ride height are not heave); the detrended s removes what is left
+CEILING_HEAVE_SPAN_S = 3.0
+#: bins of the expected signal f |δ| / d (px) for the AUC by signal strength
+SIGNAL_BINS_PX = (0.0, 1.0, 2.0, 4.0, math.inf)
 
 
 # -- data access --------------------------------------------------------------------------------
@@ -373,6 +382,92 @@ def e2_ego_bump(data: EvalData, fig_dir: Path) -> dict[str, Any]:
 
 
 # -- E4: Table I and ROC (Fig. 7) ---------------------------------------------------------------
+def windowed_std(t: Array, y: Array, window_s: float, detrend: bool) -> Array:
+    """s(t): the std of ``y`` over the frames in the last ``window_s`` (NaN until the first
+    full window), about its least-squares line when ``detrend`` (the detector's
+    `anomaly.detector.detrend`), vectorised over frames with a sliding window of the
+    frame count that spans ``window_s`` at the median frame rate."""
+    n = len(t)
+    out = np.full(n, np.nan)
+    if n < 3:
+        return out
+    w = max(3, round(window_s / float(np.median(np.diff(t)))))
+    if n < w:
+        return out
+    Y = np.lib.stride_tricks.sliding_window_view(y, w)
+    ym = Y - Y.mean(axis=1, keepdims=True)
+    if detrend:
+        T = np.lib.stride_tricks.sliding_window_view(t - t[0], w)
+        tm = T - T.mean(axis=1, keepdims=True)
+        slope = (tm * ym).sum(axis=1) / (tm * tm).sum(axis=1)
+        ym = ym - slope[:, None] * tm
+    out[w - 1 :] = np.sqrt((ym * ym).mean(axis=1))
+    return out
+
+
+def ceiling_s(truth: Mapping[str, Array], f_px: float, window_s: float, detrend: bool) -> Array:
+    """s(t) of the *true* compensated trajectory: the rendered row of the lead's rear
+    centre (``lead_rear_px``) less the camera's true pitch, f tan(phi), and heave,
+    f dz / d (dz: the camera height less its centred `CEILING_HEAVE_SPAN_S` mean; d the
+    true lead distance). What a method with perfect tracking, pitch and heave would see:
+    the data set's ceiling, not a method."""
+    t = np.asarray(truth["frame_t_s"], dtype=np.float64)
+    y = np.asarray(truth["lead_rear_px"], dtype=np.float64)[:, 1]
+    z = np.asarray(truth["cam_z_m"], dtype=np.float64)
+    d = np.asarray(truth["lead_distance_m"], dtype=np.float64)
+    k = max(1, round(CEILING_HEAVE_SPAN_S / float(np.median(np.diff(t)))) | 1)
+    mean = np.convolve(np.pad(z, (k // 2, k // 2), mode="edge"), np.ones(k) / k, mode="valid")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        yc = y - f_px * np.tan(np.asarray(truth["cam_pitch_rad"])) - f_px * (z - mean) / d
+    return windowed_std(t, yc, window_s, detrend)
+
+
+def _ceiling_scores(data: EvalData, table: ClipTable) -> Array:
+    """`ceiling_s` of each clip's recording, scored like a method (`window_max`)."""
+    det = data.methods.configs[data.methods.reference].anomaly.detector
+    by_key = {j.key: j for j in data.jobs["wild"]}
+    cache: dict[str, tuple[Array, Array]] = {}
+    out = np.zeros(len(table))
+    for i, c in enumerate(table.clips):  # clips, not frames
+        if c.recording not in cache:
+            job = by_key[c.recording]
+            tr = data.truth(job)
+            s = ceiling_s(tr, data.focal_px(job), det.window_s, det.detrend)
+            cache[c.recording] = (np.asarray(tr["frame_t_s"], dtype=np.float64), s)
+        t, s = cache[c.recording]
+        out[i] = window_max(t, s, c.t_center_s, data.plan.score_window_s)[0]
+    return out
+
+
+def _auc_by_signal(data: EvalData, table: ClipTable, scores: Mapping[str, Array]) -> dict[str, Any]:
+    """AUC of the positives in bins of their expected signal f |δ| / d (px) against all
+    backgrounds, per method (and the ceiling)."""
+    f = data.focal_px(data.jobs["wild"][0])
+    labels = table.labels
+    dist = np.asarray(
+        [
+            c.lead_distance_m if math.isfinite(c.lead_distance_m) else table.true_distance_m[i]
+            for i, c in enumerate(table.clips)
+        ]
+    )
+    height = np.asarray([abs(c.height_m) for c in table.clips])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        signal = f * height / dist
+    bins = []
+    for lo, hi in itertools.pairwise(SIGNAL_BINS_PX):
+        pos = labels & (signal >= lo) & (signal < hi)
+        keep = pos | ~labels
+        bins.append(
+            {
+                "lo_px": lo,
+                "hi_px": None if math.isinf(hi) else hi,
+                "n_pos": int(pos.sum()),
+                "auc": {m: _f(auc(v[keep], labels[keep])) for m, v in scores.items()},
+            }
+        )
+    return {"focal_px": f, "n_neg": int((~labels).sum()), "bins": bins}
+
+
 def e4_table1(data: EvalData, fig_dir: Path) -> dict[str, Any]:
     """5-fold cross-validated BA and F-score at the F-maximising threshold (chosen on the
     training folds), AUC; entire / hard / easy subsets of the wild set; ROC curves."""
@@ -433,6 +528,31 @@ def e4_table1(data: EvalData, fig_dir: Path) -> dict[str, Any]:
             if labels[mask].any() and (~labels[mask]).any():
                 fpr, tpr, _ = roc_curve(scores[mask], labels[mask])
                 rocs[m][name] = (fpr, tpr)
+    # the data set's ceiling: the true compensated trajectory, cross-validated the same way
+    ceiling = _ceiling_scores(data, table)
+    cv_ceiling = cross_validate(
+        ceiling, labels, subsets=subsets, groups=table.groups, k=plan.cv_k, seed=plan.cv_seed
+    )
+    res_ceiling = {
+        "subsets": {
+            name: {
+                "n_pos": r.n_pos,
+                "n_neg": r.n_neg,
+                "ba_mean": _f(r.balanced_accuracy_mean),
+                "ba_std": _f(r.balanced_accuracy_std),
+                "f_mean": _f(r.f_score_mean),
+                "f_std": _f(r.f_score_std),
+                "auc": _f(r.auc),
+                "auc_mean": _f(r.auc_mean),
+                "auc_std": _f(r.auc_std),
+            }
+            for name, r in cv_ceiling.items()
+        },
+        "threshold_f_max_px": _f(best_f_threshold(ceiling, labels)),
+    }
+    by_signal = _auc_by_signal(
+        data, table, {"ceiling": ceiling, **{m: table.scores[m] for m in data.method_names}}
+    )
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.6))
     for ax, name in zip(axes, ("entire", "hard"), strict=True):
@@ -463,6 +583,8 @@ def e4_table1(data: EvalData, fig_dir: Path) -> dict[str, Any]:
         "counts": {**table.counts(), "ego_same_anomaly_in_window": same},
         "size": list(plan.wild_size),
         "methods": res,
+        "ceiling": res_ceiling,
+        "by_signal": by_signal,
         "figure": _save(fig, fig_dir / "e4_roc.png"),
     }
 
