@@ -62,6 +62,10 @@ _TRUTH_KEYS = (
 CEILING_HEAVE_SPAN_S = 3.0
 #: bins of the expected signal f |δ| / d (px) for the AUC by signal strength
 SIGNAL_BINS_PX = (0.0, 1.0, 2.0, 4.0, math.inf)
+#: E5 range: each method's threshold keeps the false-positive rate on the resolution's
+#: background clips at or below this (a recall at the F-max threshold alone says nothing
+#: when that threshold flags nearly every clip)
+RANGE_MAX_FPR = 0.1
 
 
 # -- data access --------------------------------------------------------------------------------
@@ -769,9 +773,9 @@ def e5_texture_loss(
 
 
 def e5_range(data: EvalData, fig_dir: Path) -> dict[str, Any]:
-    """Recall vs the lead's distance per resolution at each method's F-maximising
-    threshold on that resolution's clips; the range is the lower edge of the first
-    distance bin whose recall is below 50 %."""
+    """Recall vs the lead's distance per resolution at each method's threshold for a
+    false-positive rate of at most `RANGE_MAX_FPR` on that resolution's background clips;
+    the range is the lower edge of the first distance bin whose recall is below 50 %."""
     plan = data.plan
     edges = np.asarray(plan.distance_bins_m, dtype=np.float64)
     out: dict[str, Any] = {"bins_m": [float(v) for v in edges], "sizes": {}}
@@ -786,8 +790,12 @@ def e5_range(data: EvalData, fig_dir: Path) -> dict[str, Any]:
         per_m: dict[str, Any] = {}
         for m in data.method_names:
             sc = table.scores[m]
-            thr = best_f_threshold(sc, labels)
-            hit = sc >= thr
+            bg = np.sort(sc[~labels])
+            # the smallest threshold that flags (score > threshold) at most RANGE_MAX_FPR of
+            # the backgrounds: the background score of rank ceil((1 - fpr) n)
+            thr = float(bg[max(0, math.ceil((1.0 - RANGE_MAX_FPR) * bg.size) - 1)])
+            hit = sc > thr
+            fpr = float((bg > thr).mean())
             recall, counts = [], []
             rng_m: float | None = None
             for i in range(edges.size - 1):
@@ -799,6 +807,7 @@ def e5_range(data: EvalData, fig_dir: Path) -> dict[str, Any]:
                     rng_m = float(edges[i])
             per_m[m] = {
                 "threshold_px": _f(thr),
+                "fpr": _f(fpr),
                 "recall": recall,
                 "positives": counts,
                 "range_m": rng_m if rng_m is not None else _f(edges[-1]),
@@ -826,7 +835,7 @@ def e5_range(data: EvalData, fig_dir: Path) -> dict[str, Any]:
             )
     ax.axhline(0.5, color="0.6", lw=0.8)
     ax.set_xlabel("lead distance at the crossing (m)")
-    ax.set_ylabel("recall at the F-max threshold")
+    ax.set_ylabel(f"recall at FPR <= {RANGE_MAX_FPR:.0%}")
     ax.set_ylim(-0.02, 1.02)
     ax.legend(fontsize=7)
     ax.set_title("E5: detection range per resolution (wild drives)")

@@ -81,6 +81,32 @@ def component_settings(
     return out
 
 
+def _git_commit() -> str | None:
+    """The checkout's commit (short hash, "+dirty" with local changes) when the package runs
+    from a git working tree; None otherwise (an installed wheel)."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[3]
+    try:
+        rev = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return rev + ("+dirty" if dirty else "") if rev else None
+
+
 def parse_experiments(text: str | None) -> tuple[str, ...]:
     """``"e1,e4"`` -> ("e1", "e4"); None or "all": every experiment."""
     if not text or text == "all":
@@ -170,6 +196,8 @@ def run_evaluation(
         "plan": plan.as_dict(),
         "experiments": list(exps),
         "version": __version__,
+        "git_commit": _git_commit(),
+        "pipeline_source": mset.source,
         "python": platform.python_version(),
         "methods": {
             m: {
