@@ -670,6 +670,8 @@ def _e5_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
     w("### Detection range per resolution")
     w("")
     w(
+        "Tracked clips only (the lead's box on the true one, as in Table I's tracked subsets: "
+        "range is a question of resolution, not of the tracker's failures). "
         "Recall of the positive clips per bin of the true lead distance, at each method's "
         "threshold for a false-positive rate of at most 10 % on that resolution's own "
         "background clips (not cross-validated; FPR column: the rate reached). Range: "
@@ -681,7 +683,8 @@ def _e5_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
     for size, r in rg["sizes"].items():
         w(
             f"**{size}** ({r['recordings']} recordings, {r['positives']} positives, "
-            f"{r['backgrounds']} backgrounds)"
+            f"{r['backgrounds']} backgrounds tracked; {r.get('untracked_clips', 0)} clips "
+            "untracked)"
         )
         w("")
         rows = []
