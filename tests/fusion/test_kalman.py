@@ -120,6 +120,31 @@ def test_step_equals_advance_then_frame(seed: int) -> None:
             assert np.array_equal(b.kf.x, a.kf.x)
 
 
+def test_clone_slot_is_the_oldest_but_the_pinned_key() -> None:
+    """The clone of a new frame replaces the oldest clone, or the second oldest when the oldest
+    is the pinned key frame (`min` and `sorted` written plainly here), through fills from the
+    initial -inf, changing pins and slots put back from a snapshot."""
+    rng = np.random.default_rng(5)
+    f = GyroPitchKalmanFilter()
+    f._bk_init(0.0)
+    ref = list(f._slots)
+    t = 0.0
+    for step in range(2000):
+        t += float(rng.uniform(0.01, 0.05))
+        if step % 3 == 0:  # pin a frame's clone (as `_bk_note`: a frame time), or nothing
+            frames = [x for x in ref if x > -math.inf]
+            f._pinned = float(rng.choice(frames)) if frames and rng.random() < 0.8 else math.nan
+        if step % 97 == 0:  # a snapshot put back: a new list
+            f._slots = list(f._slots)
+        oldest = min(ref)
+        if oldest == f._pinned:
+            oldest = sorted(ref)[1]
+        expected = ref.index(oldest)
+        ref[expected] = t
+        assert f._clone_slot(t) == expected
+        assert f._slots == ref
+
+
 def test_arrays_assigned_to_the_filterpy_filter_are_taken_up() -> None:
     """kf.P and kf.x are views of the filter's storage; a caller that assigns new arrays
     (filterpy style) is noticed at the next step, with the same result as writing in place."""

@@ -9,7 +9,12 @@ import pytest
 
 from roadpreview.fusion.config import AlignmentConfig, GyroConfig
 from roadpreview.fusion.gyro import GyroHistory
-from roadpreview.fusion.timesync import OffsetEstimate, TimeOffsetEstimator, _median
+from roadpreview.fusion.timesync import (
+    OffsetEstimate,
+    TimeOffsetEstimator,
+    VisualRateTrack,
+    _median,
+)
 
 DEG = math.pi / 180.0
 
@@ -77,6 +82,37 @@ def test_visual_chain_across_key_frames_gives_frame_to_frame_increments() -> Non
     ta, tb, d = (np.array(x) for x in (est.track.ta, est.track.tb, est.track.d))
     assert np.allclose(tb - ta, 1 / 30.0)
     assert np.allclose(d, _pitch(tb) - _pitch(ta), atol=1e-12)
+
+
+def test_queued_measurements_are_chained_as_added_one_by_one() -> None:
+    """`add` queues a measurement and the track chains the queue when it is read: the same
+    increments as reading it after every measurement, with chains broken by new key frames,
+    a gap and out-of-order frames, the window sliding and the chain pruned; the queue stays
+    bounded when the track is never read."""
+    rng = np.random.default_rng(3)
+    frames = np.arange(0, 30.0, 1 / 30.0)
+    p = _pitch(frames)
+    meas: list[tuple[float, float, float]] = []
+    key = 0
+    for i in range(1, frames.size):
+        if 12.0 <= frames[i] < 12.5:
+            key = -1
+            continue
+        if key < 0 or frames[i] - frames[key] >= 2.0:
+            key = i - 1
+        j = i - 1 if i % 97 == 0 and key < i - 1 else i  # now and then a frame out of order
+        meas.append((float(frames[key]), float(frames[j]), float(p[j] - p[key] + rng.normal())))
+    eager, lazy = VisualRateTrack(10.0), VisualRateTrack(10.0)
+    seen = []
+    for n, m in enumerate(meas, 1):
+        eager.add(*m)
+        seen.append((len(eager), eager.ta, eager.tb, eager.d))  # read: chained at once
+        lazy.add(*m)
+        assert len(lazy._queue) < 256
+        if n in (400, len(meas)):  # (in between, the queue runs full and is chained)
+            assert (len(lazy), lazy.ta, lazy.tb, lazy.d) == seen[-1]
+    for a, b in zip(lazy.arrays(), seen[-1][1:], strict=True):
+        assert np.array_equal(a, np.array(b))
 
 
 def _plain_estimate(est: TimeOffsetEstimator, gyro: GyroHistory) -> tuple[float, float] | None:

@@ -49,6 +49,7 @@ from roadpreview.fusion.timesync import TimeOffsetEstimator
 log = logging.getLogger(__name__)
 
 _INF = math.inf
+_exp, _sqrt = math.exp, math.sqrt
 _TRUSTED = VisionTrust.TRUSTED
 
 #: a frame's visual measurements: (measurement, its variance before the time-offset term,
@@ -89,6 +90,7 @@ class StreamingFusion(ABC):
         self._ease = mo.level_ease_s
         self._track_add = self.aligner.track.add  # usable measurements -> the visual rate track
         self._has_frame_done = type(self)._bk_frame_done is not StreamingFusion._bk_frame_done
+        self._gate_with_gyro = self.gate_with_gyro  # (a class attribute: a slower lookup)
         self._reset_core()
         self._bk_reset()
 
@@ -132,14 +134,15 @@ class StreamingFusion(ABC):
                 t,
             )
             return
-        if t <= self._t:  # (before the start _t is -inf)
+        t_done = self._t  # (before the start -inf)
+        if t <= t_done:
             self.events(
                 "visual-late",
                 "visual measurement of frame t=%.6f arrived after the frame was committed",
                 t,
             )
             return
-        if t_ref > self._t:  # (a committed key frame needs nothing)
+        if t_ref > t_done:  # (a committed key frame needs nothing)
             self._add_frame(t_ref)
         frames = self._frames
         if not frames or t > frames[-1]:
@@ -152,22 +155,26 @@ class StreamingFusion(ABC):
         var: float | None = None
         if meas.quality_ok:
             std, ratio, dphi = meas.std, meas.inlier_ratio, meas.dphi
+            max_dphi = self._max_dphi
             # finite and in range (NaN fails every comparison; an infinite std or ratio is
             # caught by its bound or by the explicit test)
             if (
-                -self._max_dphi <= dphi <= self._max_dphi
+                -max_dphi <= dphi <= max_dphi
                 and 0.0 < std < _INF
                 and self._min_inliers <= ratio < _INF
             ):
-                var = (self._min_std if self._min_std > std else std) ** 2  # max(std, floor)²
-                if ratio < self._low_inliers:
-                    var *= (self._low_inliers / ratio) ** 2
+                floor = self._min_std
+                var = (floor if floor > std else std) ** 2  # max(std, floor)²
+                low = self._low_inliers
+                if ratio < low:
+                    var *= (low / ratio) ** 2
                 self._track_add(t_ref, t, dphi)
             else:
                 self._unusable(meas)
-        metas = self._vis.get(t)
+        vis = self._vis
+        metas = vis.get(t)
         if metas is None:
-            self._vis[t] = [(meas, var)]
+            vis[t] = [(meas, var)]
         else:
             metas.append((meas, var))
 
@@ -203,36 +210,38 @@ class StreamingFusion(ABC):
         # the level offset: decay it (time constant `ModeConfig.level_ease_s`) and take in a
         # new shift of the key frame's estimate (`_level_shift`, inline), so that the output
         # does not step with it
+        sup = self._sup  # (after the commit, which may have started it again)
         shift = self._bk_take_level_shift()
-        if not self._t - self._sup.reacquired_t <= self._capture:
+        if not self._t - sup.reacquired_t <= self._capture:
             shift = 0.0
-        if self._ease > 0.0:
+        ease = self._ease
+        if ease > 0.0:
             level = self._level
             if level != 0.0:
-                level *= math.exp(-(t - self._level_t) / self._ease)
+                level *= _exp(-(t - self._level_t) / ease)
                 if abs(level) < 1e-12:
                     level = 0.0
             self._level_t = t
-            self._level = level - shift
+            self._level = level = level - shift
         else:
-            self._level = 0.0
+            self._level = level = 0.0
         if frames and frames[0] <= t:
             phi, var, mode, shift = self._tentative(t)
             phi -= shift
             b, bvar = self._bk_bias()
         else:
             phi, var, b, bvar = self._bk_output_bias()
-            mode = self._sup.mode
+            mode = sup.mode
         # (`0.0 if x < 0.0 else x` is max(x, 0.0) without calling the builtin; NaN stays NaN)
         out = FusedPitch(  # t, phi, std, mode, bias, time_offset, its confidence, bias_std
             t,
-            phi + self._level,
-            math.sqrt(0.0 if var < 0.0 else var),
+            phi + level,
+            _sqrt(0.0 if var < 0.0 else var),
             mode,
             b,
             self._tau,
             self._tau_conf,
-            math.sqrt(0.0 if bvar < 0.0 else bvar),
+            _sqrt(0.0 if bvar < 0.0 else bvar),
         )
         self._last_out = out
         return out
@@ -500,8 +509,9 @@ class StreamingFusion(ABC):
         to fuse."""
         # the IMU's liveness (`_alive`) and the motion since the state (`_motion3`), inline:
         # this runs once per frame
+        gyro = self.gyro
         if self._ready or self._gyro_ready(tf):
-            newest = self.gyro.newest
+            newest = gyro.newest
             if newest is None:
                 alive = tf - self._t0 <= self._timeout
             else:
@@ -512,7 +522,7 @@ class StreamingFusion(ABC):
             t1 = self._t
             if alive:
                 tau = self._tau
-                dG, dV, dM = self.gyro.motion3(t1 + tau, tf + tau)
+                dG, dV, dM = gyro.motion3(t1 + tau, tf + tau)
                 self._bk_step(tf, dG, dV, dM)
             else:
                 self._bk_step(tf, 0.0, (self._blind * (tf - t1)) ** 2, 0.0)
@@ -530,24 +540,34 @@ class StreamingFusion(ABC):
         ones when ``apply``; else return them with their variances."""
         fuse: list[tuple[VisualPitch, float]] = []
         metas = self._vis.get(tf)
-        if metas:
-            gyro = self.gyro
-            use_gyro = imu_ok and gyro.newest is not None
-            for m, var in metas:
-                if var is None:  # unusable
-                    sup.bad_frame(tf)
-                    continue
-                if apply:
-                    self._bk_note(m)
-                # the measurement's variance (`push_visual`: the estimator's, inflated for few
-                # inliers) plus the part of the gyro that a time-offset error would move:
-                # (σ_τ Δω)²
-                if use_gyro:
-                    tau = self._tau
-                    var += (self._tau_std * gyro.rate_change(m.t_ref + tau, m.t + tau)) ** 2
-                checked = self.gate_with_gyro or sup.trust is not _TRUSTED
-                consistent = self._consistent(m, var, imu_ok) if checked else True
-                if not consistent and sup.trust is _TRUSTED:  # an outlier against the gyro
+        if not metas:
+            if tf in self._fails:
+                sup.bad_frame(tf)
+            else:
+                sup.no_news(tf)
+            return fuse
+        gyro = self.gyro
+        use_gyro = imu_ok and gyro.newest is not None
+        tau = self._tau
+        for m, var in metas:
+            if var is None:  # unusable
+                sup.bad_frame(tf)
+                continue
+            if apply:
+                self._bk_note(m)
+            # the measurement's variance (`push_visual`: the estimator's, inflated for few
+            # inliers) plus the part of the gyro that a time-offset error would move:
+            # (σ_τ Δω)²
+            if use_gyro:
+                var += (self._tau_std * gyro.rate_change(m.t_ref + tau, m.t + tau)) ** 2
+            trusted = sup.trust is _TRUSTED
+            if trusted and not self._gate_with_gyro:
+                # fused unchecked: `good_frame` of trusted vision, inline (the usual case)
+                sup.bad_frames = 0
+                sup.last_good_t = tf
+            else:
+                consistent = self._consistent(m, var, imu_ok)
+                if not consistent and trusted:  # an outlier against the gyro
                     if apply:
                         self.events(
                             "gated",
@@ -556,16 +576,15 @@ class StreamingFusion(ABC):
                         )
                     sup.gated(True, self.max_rejections)
                     continue
-                if sup.good_frame(tf, consistent):
-                    if apply:
-                        accepted = self._bk_visual(m, var)
-                        sup.gated(not accepted, self.max_rejections)
-                    else:
-                        fuse.append((m, var))
-        elif tf in self._fails:
-            sup.bad_frame(tf)
-        else:
-            sup.no_news(tf)
+                if not sup.good_frame(tf, consistent):
+                    continue
+            if apply:
+                if self._bk_visual(m, var):
+                    sup.rejected = 0  # `gated(False, ...)`, inline (max_rejections >= 1)
+                else:
+                    sup.gated(True, self.max_rejections)
+            else:
+                fuse.append((m, var))
         return fuse
 
     def _unusable(self, m: VisualPitch) -> None:

@@ -53,9 +53,11 @@ allocating arrays:
   ``P + K wᵀ + w Kᵀ`` with ``w = (S/2) K - u``. This is the same polynomial
   in K as Joseph's (hence its insensitivity to an error in K, unlike
   ``P - K S Kᵀ``) and symmetric by construction. ``B = [[w, y], [K, 0]]`` and
-  a broadcast product of ``[K; w]`` with it gives ``[K wᵀ | K y]`` and
+  the product of ``[K; w]`` (as columns) with it gives ``[K wᵀ | K y]`` and
   ``[w Kᵀ | 0]``, their sum the change of ``[P | x]`` (exactly symmetric),
-  one add updates P and x together: seven small numpy calls, no allocation.
+  one add updates P and x together: eight small numpy calls, no allocation.
+  (The outer product is an element-wise product of two gathers from B, one
+  ``take``: numpy's broadcasting machinery costs three plain calls here.)
   ``test_lean_update_equals_filterpy_update`` checks it against
   ``KalmanFilter.update`` on random states (x, P and K to 1e-12 relative).
 
@@ -115,17 +117,45 @@ class GyroPitchKalmanFilter(StreamingFusion):
         self._un = self._u[:n]
         # B = [[w, y], [K, 0]]: the update's vectors. With A = [K; w] as columns, one product
         # gives MM[0] = [K wᵀ | K y] and MM[1] = [w Kᵀ | 0]; their sum [K wᵀ + w Kᵀ | K y]
-        # (exactly symmetric on the left: K_i w_j + w_i K_j) is the whole change of [P | x]
-        B = np.zeros((2, n + 1))
+        # (exactly symmetric on the left: K_i w_j + w_i K_j) is the whole change of [P | x].
+        # The product's operands, A[a, i] repeated along j and B[a, j] along i, are gathered
+        # from B by one `take` (indices made here) into same-shape contiguous arrays, so
+        # that the product is a plain element-wise one: a broadcast product (A[:, :, None] *
+        # B[:, None, :]) goes through numpy's buffered iterator, as costly as three calls
+        m = n + 1
+        B = np.zeros((2, m))
         self._Bf, self._w, self._K = B.reshape(-1), B[0, :n], B[1, :n]
-        self._A3, self._B3 = B[::-1, :n, None], B[:, None, :]
-        self._MM = np.empty((2, n, n + 1))
+        i, j = np.indices((n, m))
+        # flat indices into B: [K_i; w_i] (rows 1 and 0 of B, by i) and [B[0, j]; B[1, j]]
+        self._gather = np.stack((m + i, i, j, m + j)).reshape(-1)
+        self._AB = np.empty((2, 2, n, m))  # the two gathered operands
+        self._ABf, self._Ag, self._Bg = self._AB.reshape(-1), self._AB[0], self._AB[1]
+        self._MM = np.empty((2, n, m))
         self._MM0, self._MM1 = self._MM[0], self._MM[1]
         self._dXP = np.empty((n, n + 1))  # the change of [P | x]
         # single entries through memoryviews (as `_sv`), flat for the change
         self._s0v: Any = self._s0.data
         self._Bv: Any = self._Bf.data
         self._dv: Any = self._dXP.data.cast("B").cast("d")
+        # all of them for `_update`, read in one attribute load
+        self._ubuf: tuple[Any, ...] = (
+            self._u,
+            self._un,
+            self._K,
+            self._w,
+            self._s0,
+            self._s0v,
+            self._Bv,
+            self._Bf,
+            self._gather,
+            self._ABf,
+            self._Ag,
+            self._Bg,
+            self._MM,
+            self._MM0,
+            self._MM1,
+            self._dXP,
+        )
 
     _VIEWS = (
         "_s0",
@@ -134,8 +164,11 @@ class GyroPitchKalmanFilter(StreamingFusion):
         "_Bf",
         "_w",
         "_K",
-        "_A3",
-        "_B3",
+        "_gather",
+        "_AB",
+        "_ABf",
+        "_Ag",
+        "_Bg",
         "_MM",
         "_MM0",
         "_MM1",
@@ -143,6 +176,7 @@ class GyroPitchKalmanFilter(StreamingFusion):
         "_s0v",
         "_Bv",
         "_dv",
+        "_ubuf",
         "_xp",
         "_Pa",
         "_xa",
@@ -194,6 +228,9 @@ class GyroPitchKalmanFilter(StreamingFusion):
         n = self._n
         self._install(array("d", bytes(8 * n * (n + 1))))
         self._slots: list[float] = [-math.inf] * self.kcfg.n_clones
+        # the slots, oldest clone first, and the list of slots that order is for (`_clone_slot`)
+        self._age: list[int] = list(range(self.kcfg.n_clones))
+        self._age_of: list[float] | None = self._slots
         self._pinned = math.nan
         self._shift = 0.0  # movement of the pinned key's clone (level change)
         # per key frame: (last frame measured against it, its dphi, its variance)
@@ -252,8 +289,9 @@ class GyroPitchKalmanFilter(StreamingFusion):
         st[n] = st[n] + (dG - dM * st[m + n])  # phi += ΔG - ΔM b
         qb = self._q_bias
         if dM != 0.0:
-            p01 = st[1] - dM * st[m + 1]
-            p00 = ((st[0] - dM * st[m]) - dM * p01) + (dV + qb * dM * dM * dM / 3.0)
+            p10 = st[1]  # (P[1, 0], P being symmetric)
+            p01 = p10 - dM * st[m + 1]
+            p00 = ((st[0] - dM * p10) - dM * p01) + (dV + qb * dM * dM * dM / 3.0)
             p01 = p01 - qb * dM * dM / 2.0
             for i, im, i1 in self._below:  # P[0, i] -= ΔM P[1, i]; P[i, 0] and P[i, j] the same
                 v = st[i] - dM * st[i1]
@@ -274,12 +312,22 @@ class GyroPitchKalmanFilter(StreamingFusion):
         st[m + 1] = st[m + 1] + qb * (t - self._t)
 
     def _clone_slot(self, t: float) -> int:
-        """The slot of the clone of frame ``t``: the oldest, except the pinned key frame's."""
-        slots = self._slots
-        oldest = min(slots)
-        if oldest == self._pinned:  # the key frame's clone (usually the oldest) stays
-            oldest = sorted(slots)[1]  # (slot times are distinct but for the initial -inf)
-        victim = slots.index(oldest)
+        """The slot of the clone of frame ``t``: the oldest, except the pinned key frame's.
+
+        ``_age`` lists the slots oldest first, as ``sorted(range(k), key=slots)`` would (ties,
+        the initial -inf, by index): frames come in time order, so the slot written last is
+        the newest, and the victim is the first entry, or the second when the first is the
+        pinned key's (the usual case), without a `min` and a `sort` per frame. It is sorted
+        again when ``_slots`` has been replaced (a snapshot put back, a test) or ``t`` is not
+        newer than every clone."""
+        slots, age = self._slots, self._age
+        if self._age_of is not slots or not t > slots[age[-1]]:
+            age[:] = sorted(range(len(slots)), key=slots.__getitem__)
+            # (``t`` not the newest: after it is written the list is out of order, redo it)
+            self._age_of = slots if t > slots[age[-1]] else None
+        # (slot times are distinct but for the initial -inf, and the pinned key is finite)
+        victim = age.pop(1 if slots[age[0]] == self._pinned else 0)
+        age.append(victim)
         slots[victim] = t
         return victim
 
@@ -297,36 +345,38 @@ class GyroPitchKalmanFilter(StreamingFusion):
             self._pinned = t_ref
 
     def _bk_visual(self, meas: VisualPitch, var: float) -> bool:
-        z, R = meas.dphi, var
+        t_ref, dphi = meas.t_ref, meas.dphi
+        z, R = dphi, var
         slots = self._slots
         try:
-            slot = slots.index(meas.t_ref)
+            slot = slots.index(t_ref)
         except ValueError:
-            prev = self._last_by_key.get(meas.t_ref)
+            prev = self._last_by_key.get(t_ref)
             if prev is None or prev[0] not in slots:
                 self.events(
                     "no-key",
                     "key frame t_ref=%.6f of the measurement at t=%.6f has no clone and no"
                     " earlier measurement: skipped",
-                    meas.t_ref,
+                    t_ref,
                     meas.t,
                 )
                 return True  # not an outlier: nothing to test it against
             self.events(
-                "key-increment", "key frame t_ref=%.6f has no clone: increments used", meas.t_ref
+                "key-increment", "key frame t_ref=%.6f has no clone: increments used", t_ref
             )
             slot = slots.index(prev[0])
-            z, R = meas.dphi - prev[1], var + prev[2]
+            z, R = dphi - prev[1], var + prev[2]
             self._pinned = prev[0]
         last = self._last_by_key
-        last[meas.t_ref] = (meas.t, meas.dphi, var)
+        last[t_ref] = (meas.t, dphi, var)
         if len(last) > 8:
             del last[min(last)]
         j = 2 + slot
         st, n = self._sv, self._n
-        m = n + 1
-        y = z - (st[n] - st[j * m + n])
-        s = st[0] + st[j * m + j] - 2.0 * st[j] + R
+        jm = j * (n + 1)
+        y = z - (st[n] - st[jm + n])
+        p00, p0j, pjj = st[0], st[j], st[jm + j]
+        s = p00 + pjj - 2.0 * p0j + R
         if s < R:  # max(s, R)
             s = R
         if y * y > self._gate2 * s:
@@ -337,34 +387,37 @@ class GyroPitchKalmanFilter(StreamingFusion):
                 abs(y) / math.sqrt(s),
             )
             return False
-        self._update(j, y, R)
+        # (the update's S as `_update` forms it, P[j, 0] being P[0, j])
+        self._update(j, y, R, (p00 - p0j) - (p0j - pjj) + R)
         pinned = self._pinned  # how far the key frame's estimate moved: its row's K y
         if pinned == slots[slot]:  # (the key measured against, as a rule)
-            self._shift += self._dv[j * m + n]
+            self._shift += self._dv[jm + n]
         elif pinned in slots:
-            self._shift += self._dv[(2 + slots.index(pinned)) * m + n]
+            self._shift += self._dv[(2 + slots.index(pinned)) * (n + 1) + n]
         return True
 
-    def _update(self, j: int, y: float, R: float) -> Array:
+    def _update(self, j: int, y: float, R: float, S: float | None = None) -> Array:
         """Joseph-form update with the scalar innovation ``y`` of ``h = e0 - e_j`` and
         variance ``R`` (filterpy's ``update`` for this h, module docstring):
         ``P += K wᵀ + w Kᵀ`` with ``w = (S/2) K - u``, ``x += K y``, ``u = P hᵀ``,
-        ``K = u / S``. Returns the change of [P | x] (its last column is K y)."""
-        u, un, K, w, s0, st = self._u, self._un, self._K, self._w, self._s0, self._sv
-        n = self._n
-        np.subtract(self._rows[0], self._rows[j], u)  # P hᵀ (P symmetric), then x0 - xj
-        jm = j * (n + 1)
-        S = (st[0] - st[jm]) - (st[j] - st[jm + j]) + R  # h P hᵀ + R = u[0] - u[j] + R
-        self._s0v[()] = 1.0 / S
+        ``K = u / S``, ``S = h u + R`` (computed here unless the caller has it). Returns the
+        change of [P | x] (its last column is K y)."""
+        u, un, K, w, s0, s0v, Bv, Bf, gather, ABf, Ag, Bg, MM, MM0, MM1, dxp = self._ubuf
+        n, rows, xp = self._n, self._rows, self._xp
+        np.subtract(rows[0], rows[j], u)  # P hᵀ (P symmetric), then x0 - xj
+        if S is None:
+            st, jm = self._sv, j * (n + 1)
+            S = (st[0] - st[jm]) - (st[j] - st[jm + j]) + R  # h P hᵀ + R = u[0] - u[j] + R
+        s0v[()] = 1.0 / S
         np.multiply(un, s0, K)  # K = P hᵀ S⁻¹
-        self._s0v[()] = 0.5 * S
+        s0v[()] = 0.5 * S
         np.multiply(K, s0, w)
         np.subtract(w, un, w)  # w = (S/2) K - P hᵀ
-        self._Bv[n] = y
-        dxp = self._dXP
-        np.multiply(self._A3, self._B3, self._MM)  # [K wᵀ | K y] and [w Kᵀ | 0]
-        np.add(self._MM0, self._MM1, dxp)  # [K wᵀ + w Kᵀ | K y]
-        np.add(self._xp, dxp, self._xp)  # P += K wᵀ + w Kᵀ, x += K y
+        Bv[n] = y
+        Bf.take(gather, None, ABf, "clip")  # ("clip": no index check, they are in range)
+        np.multiply(Ag, Bg, MM)  # [K wᵀ | K y] and [w Kᵀ | 0]
+        np.add(MM0, MM1, dxp)  # [K wᵀ + w Kᵀ | K y]
+        np.add(xp, dxp, xp)  # P += K wᵀ + w Kᵀ, x += K y
         return dxp
 
     def _bk_output(self) -> tuple[float, float]:

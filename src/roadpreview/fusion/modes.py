@@ -33,6 +33,14 @@ class VisionTrust(Enum):
     VALIDATING = "validating"
 
 
+# the members as module constants for the per-frame methods: an enum member read through its
+# class is an unspecialised attribute lookup in CPython 3.11 (about 0.1 µs each)
+_STARTING, _TRUSTED = VisionTrust.STARTING, VisionTrust.TRUSTED
+_LOST, _VALIDATING = VisionTrust.LOST, VisionTrust.VALIDATING
+_FUSED, _VISUAL_ONLY = FusionMode.FUSED, FusionMode.VISUAL_ONLY
+_IMU_ONLY, _DEGRADED = FusionMode.IMU_ONLY, FusionMode.DEGRADED
+
+
 @dataclass
 class ModeSupervisor:
     """Per-frame vision trust and mode; a plain dataclass so that it can be copied."""
@@ -48,7 +56,7 @@ class ModeSupervisor:
     mode: FusionMode = FusionMode.DEGRADED
 
     def trusted(self) -> bool:
-        return self.trust is VisionTrust.TRUSTED
+        return self.trust is _TRUSTED
 
     def good_frame(self, t: float, consistent: bool) -> bool:
         """A frame with a good-quality measurement; True when it may be fused.
@@ -57,20 +65,20 @@ class ModeSupervisor:
         cannot be checked).
         """
         self.bad_frames = 0
-        if self.trust is VisionTrust.STARTING:
-            self.trust = VisionTrust.TRUSTED
-        if self.trust is VisionTrust.TRUSTED:
+        if self.trust is _STARTING:
+            self.trust = _TRUSTED
+        if self.trust is _TRUSTED:
             self.last_good_t = t
             return True
         if not consistent:
-            self.trust = VisionTrust.LOST
+            self.trust = _LOST
             return False
         self.last_good_t = t
-        if self.trust is VisionTrust.LOST:
-            self.trust = VisionTrust.VALIDATING
+        if self.trust is _LOST:
+            self.trust = _VALIDATING
             self.validating_since = t
         if t - self.validating_since >= self.cfg.revalidation_s - 1e-9:
-            self.trust = VisionTrust.TRUSTED
+            self.trust = _TRUSTED
             self.rejected = 0
             self.reacquired_t = t
             return True
@@ -79,32 +87,30 @@ class ModeSupervisor:
     def bad_frame(self, t: float) -> None:
         """A frame where vision failed (no texture, poor fit) or gave nonsense."""
         self.bad_frames += 1
-        validating = self.trust is VisionTrust.VALIDATING
-        if validating or (
-            self.trust is VisionTrust.TRUSTED and self.bad_frames >= self.cfg.loss_frames
-        ):
-            self.trust = VisionTrust.LOST
+        validating = self.trust is _VALIDATING
+        if validating or (self.trust is _TRUSTED and self.bad_frames >= self.cfg.loss_frames):
+            self.trust = _LOST
 
     def no_news(self, t: float) -> None:
         """A frame without any visual result: lost after ``vision_timeout_s``."""
-        if self.trust is VisionTrust.TRUSTED and t - self.last_good_t > self.cfg.vision_timeout_s:
-            self.trust = VisionTrust.LOST
+        if self.trust is _TRUSTED and t - self.last_good_t > self.cfg.vision_timeout_s:
+            self.trust = _LOST
 
     def gated(self, rejected: bool, max_rejections: int) -> None:
         """Outcome of the back end's outlier gate for a fused measurement."""
         self.rejected = self.rejected + 1 if rejected else 0
-        if self.rejected >= max_rejections and self.trust is VisionTrust.TRUSTED:
-            self.trust = VisionTrust.LOST
+        if self.rejected >= max_rejections and self.trust is _TRUSTED:
+            self.trust = _LOST
             self.rejected = 0
 
     def update_mode(self, imu_ok: bool) -> FusionMode:
-        vision = self.trust is VisionTrust.TRUSTED
+        vision = self.trust is _TRUSTED
         if vision and imu_ok:
-            self.mode = FusionMode.FUSED
+            self.mode = _FUSED
         elif vision:
-            self.mode = FusionMode.VISUAL_ONLY
+            self.mode = _VISUAL_ONLY
         elif imu_ok:
-            self.mode = FusionMode.IMU_ONLY
+            self.mode = _IMU_ONLY
         else:
-            self.mode = FusionMode.DEGRADED
+            self.mode = _DEGRADED
         return self.mode

@@ -37,6 +37,7 @@ from roadpreview.fusion.gyro import GyroHistory
 
 _MAX_INCREMENT_FRAMES_S = 0.12  # consecutive frames further apart than this give no rate
 _CUT_BLOCK = 256  # expired increments are deleted from the front in blocks of this many
+_QUEUE_MAX = 256  # measurements queued by `VisualRateTrack.add` before they are chained
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,8 +56,10 @@ class VisualRateTrack:
 
     The increments of the sliding window are ``ta``, ``tb`` (start and end frame times) and
     ``d`` (pitch change). They are kept in three lists with the index of the oldest one still
-    in the window (`add` runs per measurement: an append and a comparison, no pop), and the
-    expired front is cut off in blocks.
+    in the window, and the expired front is cut off in blocks. `add` runs per measurement
+    and only queues it; the queue is chained, in order, when the track is read (or grows
+    long): one loop with its state in local variables instead of a call and its attribute
+    reads per measurement, the same increments.
     """
 
     def __init__(self, window_s: float) -> None:
@@ -71,28 +74,39 @@ class VisualRateTrack:
         self._tb: list[float] = []
         self._d: list[float] = []
         self._head = 0
+        self._queue: list[tuple[float, float, float]] = []  # added, not chained yet
 
     def __len__(self) -> int:
+        if self._queue:
+            self._chain_queued()
         return len(self._ta) - self._head
 
     @property
     def ta(self) -> list[float]:
         """Start frame times of the increments in the window (a copy)."""
+        if self._queue:
+            self._chain_queued()
         return self._ta[self._head :]
 
     @property
     def tb(self) -> list[float]:
         """End frame times of the increments in the window (a copy)."""
+        if self._queue:
+            self._chain_queued()
         return self._tb[self._head :]
 
     @property
     def d(self) -> list[float]:
         """Pitch changes of the increments in the window (a copy)."""
+        if self._queue:
+            self._chain_queued()
         return self._d[self._head :]
 
     def arrays(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """``ta``, ``tb`` and ``d`` as numpy arrays (`np.fromiter`: a list of floats is
         converted faster than by `np.array`, which first inspects every element)."""
+        if self._queue:
+            self._chain_queued()
         h = self._head
         n = len(self._ta) - h
         return (
@@ -102,47 +116,62 @@ class VisualRateTrack:
         )
 
     def add(self, t_ref: float, t: float, dphi: float) -> None:
-        """A trusted-quality measurement; extends the chain and records an increment."""
-        chain = self._chain
-        phi_ref = chain.get(t_ref)  # (one dict lookup each: the keys are float frame times)
-        if phi_ref is not None:
-            phi = phi_ref + dphi
-        else:  # a key frame the chain does not know: start a new chain there
-            chain.clear()
-            chain[t_ref] = 0.0
-            phi = dphi
-        chain[t] = phi
-        prev = self._last_t
-        ta = self._ta
-        if (
-            prev < t
-            and t - prev <= _MAX_INCREMENT_FRAMES_S
-            and (phi_prev := chain.get(prev)) is not None
-        ):
-            ta.append(prev)
-            self._tb.append(t)
-            self._d.append(phi - phi_prev)
-        elif t_ref < t and t - t_ref <= _MAX_INCREMENT_FRAMES_S and t_ref != prev:
-            ta.append(t_ref)
-            self._tb.append(t)
-            self._d.append(dphi)
-        if t > prev:
-            self._last_t = t
-        # drop the increments that started before the window
-        h = self._head
-        if h < len(ta) and ta[h] < t - self.window_s:
-            old = t - self.window_s
-            n = len(ta)
-            while h < n and ta[h] < old:
-                h += 1
-            if h >= _CUT_BLOCK:  # cut the expired front off the lists now and then
-                del ta[:h], self._tb[:h], self._d[:h]
-                h = 0
-            self._head = h
-        if len(chain) > 256:  # keep the recent part of the chain and the key
-            keep = {k: v for k, v in chain.items() if k >= t - 5.0 or k == t_ref}
-            chain.clear()
-            chain.update(keep)
+        """A trusted-quality measurement; extends the chain and records an increment (when
+        the track is next read)."""
+        queue = self._queue
+        queue.append((t_ref, t, dphi))
+        if len(queue) >= _QUEUE_MAX:
+            self._chain_queued()
+
+    def _chain_queued(self) -> None:
+        """Chain the queued measurements, in the order they were added."""
+        chain, ta, tb, d = self._chain, self._ta, self._tb, self._d
+        prev, h, window = self._last_t, self._head, self.window_s
+        for t_ref, t, dphi in self._queue:
+            phi_ref = chain.get(t_ref)  # (one dict lookup each: the keys are float frame times)
+            if phi_ref is not None:
+                phi = phi_ref + dphi
+            else:  # a key frame the chain does not know: start a new chain there
+                chain.clear()
+                chain[t_ref] = 0.0
+                phi = dphi
+            chain[t] = phi
+            if (
+                prev < t
+                and t - prev <= _MAX_INCREMENT_FRAMES_S
+                and (phi_prev := chain.get(prev)) is not None
+            ):
+                ta.append(prev)
+                tb.append(t)
+                d.append(phi - phi_prev)
+            elif t_ref < t and t - t_ref <= _MAX_INCREMENT_FRAMES_S and t_ref != prev:
+                ta.append(t_ref)
+                tb.append(t)
+                d.append(dphi)
+            if t > prev:
+                prev = t
+            # drop the increments that started before the window
+            if h < len(ta) and ta[h] < t - window:
+                old = t - window
+                n = len(ta)
+                while h < n and ta[h] < old:
+                    h += 1
+                if h >= _CUT_BLOCK:  # cut the expired front off the lists now and then
+                    del ta[:h], tb[:h], d[:h]
+                    h = 0
+            if len(chain) > 256:  # keep the recent part of the chain and the key
+                _keep_recent(chain, t - 5.0, t_ref)
+        self._last_t, self._head = prev, h
+        self._queue.clear()
+
+
+def _keep_recent(chain: dict[float, float], oldest: float, key: float) -> None:
+    """Drop the chain's frames before ``oldest``, but the key frame ``key``. (A function of its
+    own: a comprehension in the chaining loop would make the loop's ``t`` and ``t_ref`` cell
+    variables, slower to read on every pass.)"""
+    keep = {k: v for k, v in chain.items() if k >= oldest or k == key}
+    chain.clear()
+    chain.update(keep)
 
 
 class TimeOffsetEstimator:
@@ -166,7 +195,7 @@ class TimeOffsetEstimator:
             return None
         ta, tb, d = self.track.arrays()
         ok = tb + cfg.max_offset_s <= newest  # the gyro must cover every shifted interval
-        n = int(np.add.reduce(ok, dtype=np.intp))  # np.count_nonzero(ok)
+        n = int(np.count_nonzero(ok))
         if n < cfg.min_increments:
             return None
         if n < ok.size:  # (as a rule the newest few: then views, not copies)
