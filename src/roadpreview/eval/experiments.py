@@ -472,6 +472,24 @@ def _auc_by_signal(data: EvalData, table: ClipTable, scores: Mapping[str, Array]
     return {"focal_px": f, "n_neg": int((~labels).sum()), "bins": bins}
 
 
+def _subset_results(cv: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """`cross_validate`'s per-subset results as plain data."""
+    return {
+        name: {
+            "n_pos": r.n_pos,
+            "n_neg": r.n_neg,
+            "ba_mean": _f(r.balanced_accuracy_mean),
+            "ba_std": _f(r.balanced_accuracy_std),
+            "f_mean": _f(r.f_score_mean),
+            "f_std": _f(r.f_score_std),
+            "auc": _f(r.auc),
+            "auc_mean": _f(r.auc_mean),
+            "auc_std": _f(r.auc_std),
+        }
+        for name, r in cv.items()
+    }
+
+
 def e4_table1(data: EvalData, fig_dir: Path) -> dict[str, Any]:
     """5-fold cross-validated BA and F-score at the F-maximising threshold (chosen on the
     training folds), AUC; entire / hard / easy subsets of the wild set; ROC curves."""
@@ -503,20 +521,7 @@ def e4_table1(data: EvalData, fig_dir: Path) -> dict[str, Any]:
         c_default = confusion(scores, labels, 1.0)
         c_best = confusion(scores, labels, thr_all)
         res[m] = {
-            "subsets": {
-                name: {
-                    "n_pos": r.n_pos,
-                    "n_neg": r.n_neg,
-                    "ba_mean": _f(r.balanced_accuracy_mean),
-                    "ba_std": _f(r.balanced_accuracy_std),
-                    "f_mean": _f(r.f_score_mean),
-                    "f_std": _f(r.f_score_std),
-                    "auc": _f(r.auc),
-                    "auc_mean": _f(r.auc_mean),
-                    "auc_std": _f(r.auc_std),
-                }
-                for name, r in cv.items()
-            },
+            "subsets": _subset_results(cv),
             "fold_thresholds_px": [_f(v) for v in fold_thr],
             "threshold_f_max_px": _f(thr_all),
             "at_f_max": {"tpr": _f(c_best.tpr), "fpr": _f(c_best.fpr), "f": _f(c_best.f_score)},
@@ -538,20 +543,7 @@ def e4_table1(data: EvalData, fig_dir: Path) -> dict[str, Any]:
         ceiling, labels, subsets=subsets, groups=table.groups, k=plan.cv_k, seed=plan.cv_seed
     )
     res_ceiling = {
-        "subsets": {
-            name: {
-                "n_pos": r.n_pos,
-                "n_neg": r.n_neg,
-                "ba_mean": _f(r.balanced_accuracy_mean),
-                "ba_std": _f(r.balanced_accuracy_std),
-                "f_mean": _f(r.f_score_mean),
-                "f_std": _f(r.f_score_std),
-                "auc": _f(r.auc),
-                "auc_mean": _f(r.auc_mean),
-                "auc_std": _f(r.auc_std),
-            }
-            for name, r in cv_ceiling.items()
-        },
+        "subsets": _subset_results(cv_ceiling),
         "threshold_f_max_px": _f(best_f_threshold(ceiling, labels)),
     }
     by_signal = _auc_by_signal(
