@@ -98,7 +98,7 @@ class VisualOnlyPitch:
                 ref = (self._phi, self._var)
                 self._chain[m.t_ref] = ref
             self._phi = ref[0] + m.dphi
-            self._var = ref[1] + max(m.std, self.config.vision.min_std_rad) ** 2
+            self._var = ref[1] + self.config.vision.variance(m.std)
             self._chain[t] = (self._phi, self._var)
             self._bad = 0
         elif t not in self._chain:

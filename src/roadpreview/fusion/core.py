@@ -82,7 +82,8 @@ class StreamingFusion(ABC):
         self._reorder = g.reorder_window_s
         self._history = g.history_s
         self._blind = g.blind_rate_std_rad_s
-        self._min_std = v.min_std_rad
+        self._std_scale = v.std_scale
+        self._min_var = v.min_std_rad**2
         self._low_inliers = v.low_inlier_ratio
         self._min_inliers = v.min_inlier_ratio
         self._max_dphi = v.max_abs_dphi_rad
@@ -150,8 +151,9 @@ class StreamingFusion(ABC):
         else:
             self._add_frame(t)
         # usable (the front end says so and the numbers make sense)? Then its variance as
-        # far as it is known now: the estimator's std, floored, inflated for few inliers
-        # (the time-offset term is added when the frame is processed); None: unusable
+        # far as it is known now: the estimator's std scaled, its floor added, inflated for
+        # few inliers (the time-offset term is added when the frame is processed); None:
+        # unusable
         var: float | None = None
         if meas.quality_ok:
             std, ratio, dphi = meas.std, meas.inlier_ratio, meas.dphi
@@ -163,8 +165,8 @@ class StreamingFusion(ABC):
                 and 0.0 < std < _INF
                 and self._min_inliers <= ratio < _INF
             ):
-                floor = self._min_std
-                var = (floor if floor > std else std) ** 2  # max(std, floor)²
+                std *= self._std_scale  # `VisionConfig.variance`, inline
+                var = std * std + self._min_var
                 low = self._low_inliers
                 if ratio < low:
                     var *= (low / ratio) ** 2
