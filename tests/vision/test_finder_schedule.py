@@ -24,7 +24,7 @@ from roadpreview.vision.motion import RearSearch, _masked_median, fit_rear
 
 CAM = CameraModel.from_fov(320, 180, 54.0)
 LEAD = (130.0, 70.0, 190.0, 120.0)  # spans the centre column, bottom below the horizon
-CUT_IN = (110.0, 80.0, 210.0, 150.0)  # spans it too and is nearer (lower bottom)
+CUT_IN = (110.0, 80.0, 210.0, 130.0)  # spans it too and is nearer (lower bottom, 5.6 m)
 
 
 def _texture(seed: int = 0, width: int = 400) -> np.ndarray:

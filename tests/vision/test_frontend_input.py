@@ -102,6 +102,28 @@ def test_target_is_the_vehicle_nearest_the_centre() -> None:
     assert choose_target(dets[:2] + dets[3:], cam, horizon_v=172.9) == 1
 
 
+def test_target_nearer_than_the_minimum_distance_is_not_taken() -> None:
+    # 720p, f = 706.5 px, camera 1.3 m above the road: the flat road at distance d lies
+    # f h / d = 918.5 / d px below the horizon
+    cam = CameraModel(
+        width=1280, height=720, fx=706.5, fy=706.5, cx=639.5, cy=359.5, mount_height_m=1.3
+    )
+    horizon = 359.5
+    lead = Detection((610, 330, 670, 359.5 + 918.5 / 18.0), 0.9, "vehicle")  # at 18 m
+    road = Detection((350, 240, 1040, 719), 0.3, "obstacle")  # the road below it, 2.5 m
+    at_5m = Detection((450, 200, 830, 359.5 + 918.5 / 5.0), 0.3, "vehicle")
+    # without the gate the centre rule takes the nearest box, the road
+    assert choose_target([lead, road], cam, horizon_v=horizon) == 1
+    assert choose_target([lead, road], cam, horizon_v=horizon, min_distance_m=4.0) == 0
+    assert choose_target([road], cam, horizon_v=horizon, min_distance_m=4.0) is None
+    # the gate is the flat-road row of min_distance_m: 5 m passes a 4 m gate, not a 6 m one
+    assert choose_target([lead, at_5m], cam, horizon_v=horizon, min_distance_m=4.0) == 1
+    assert choose_target([lead, at_5m], cam, horizon_v=horizon, min_distance_m=6.0) == 0
+    # the gate follows the horizon: 20 px lower, the 5 m bottom reads 5.6 m, past a 5.5 m gate
+    assert choose_target([at_5m], cam, horizon_v=horizon, min_distance_m=5.5) is None
+    assert choose_target([at_5m], cam, horizon_v=horizon + 20, min_distance_m=5.5) == 0
+
+
 def test_distance_cues_and_their_fusion() -> None:
     cam = CameraModel(
         width=1280, height=720, fx=700.0, fy=700.0, cx=639.5, cy=359.5, mount_height_m=1.3

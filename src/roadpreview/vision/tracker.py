@@ -80,6 +80,17 @@ class LeadTrackerConfig:
         0.5, ge=0.0, help="crop around the box for LK, a fraction of its size"
     )
     min_box_px: float = param(8.0, unit="px", gt=0.0, help="smaller detections are ignored")
+    min_distance_m: float = param(
+        5.0,
+        unit="m",
+        ge=0.0,
+        le=50.0,
+        help="a detection whose bottom is nearer than this on the flat road is not taken as"
+        " the lead (a vehicle tracked already may come closer). What the motion finder reports"
+        " there is road: entering a fog bank, or with the horizon off, it boxed the road below a"
+        " real lead at 17-23 m as an 'obstacle' at 1-4.3 m, which the centre rule prefers (the"
+        " nearest box); a 720p camera at 1.3 m with f = 706 px sees the road from 2.5 m on",
+    )
     match_iou: float = param(0.3, gt=0.0, le=1.0, help="a detection this close is the target")
     max_box_width_frac: float = param(
         0.6,
@@ -200,14 +211,25 @@ def choose_target(
     min_box_px: float = 8.0,
     tolerance: float = 0.05,
     classes: tuple[str, ...] | None = None,
+    min_distance_m: float = 0.0,
 ) -> int | None:
-    """Index of the detection nearest the image centre, below the horizon; None if none."""
+    """Index of the detection nearest the image centre, below the horizon and no nearer than
+    ``min_distance_m`` on the flat road (its bottom row; the box finder's ``user`` box is
+    taken as given); None if none."""
     column = camera.fx * camera.t[0] / camera.t[2] + camera.cx
+    # rows below horizon_v + f h / d_min are nearer than d_min on a flat road
+    lowest = (
+        horizon_v + camera.fy * camera.mount_height_m / min_distance_m
+        if min_distance_m > 0.0
+        else math.inf
+    )
     best: tuple[tuple[int, float], int] | None = None
     for i, d in enumerate(detections):  # a handful of detections
         if classes is not None and d.class_name not in classes:
             continue
         if d.width < min_box_px or d.height < min_box_px or d.box[3] <= horizon_v:
+            continue
+        if d.box[3] > lowest and d.class_name != "user":  # (the user's box is the lead)
             continue
         key = target_key(d, column, tolerance)
         if best is None or key < best[0]:
@@ -418,6 +440,7 @@ class LeadVehicleTracker:
                 min_box_px=cfg.min_box_px,
                 tolerance=cfg.centre_tolerance,
                 classes=self._lead_classes(detections),
+                min_distance_m=cfg.min_distance_m,
             )
             if best is not None:
                 changed = self._consider(ctx, detections, best)
