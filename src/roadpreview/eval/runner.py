@@ -63,7 +63,8 @@ def _digest(obj: Any) -> str:
 @cache
 def _source_digest(parts: tuple[str, ...], exclude: tuple[str, ...] = ()) -> str:
     """Digest of the package's source files under ``parts`` (``("",)``: all), minus
-    ``exclude``; data files (DBC, mappings) included."""
+    ``exclude`` (top-level names or paths relative to the package); data files (DBC,
+    mappings) included."""
     h = hashlib.sha256(__version__.encode())
     for part in parts:
         root = _PACKAGE / part
@@ -71,7 +72,7 @@ def _source_digest(parts: tuple[str, ...], exclude: tuple[str, ...] = ()) -> str
             rel = path.relative_to(_PACKAGE)
             if not path.is_file() or path.suffix not in (".py", ".dbc", ".toml"):
                 continue
-            if rel.parts and rel.parts[0] in exclude:
+            if rel.parts and (rel.parts[0] in exclude or rel.as_posix() in exclude):
                 continue
             h.update(str(rel).encode())
             h.update(path.read_bytes())
@@ -83,9 +84,15 @@ def pipeline_source_digest() -> str:
     return _source_digest(("",), _NOT_PIPELINE)
 
 
+#: simulator modules a recording does not depend on: a preset only builds the
+#: `ScenarioConfig` (which is in the recording's digest itself), the data set module only
+#: draws clips from finished recordings
+_NOT_RECORDING = ("sim/presets.py", "sim/dataset.py")
+
+
 def simulator_source_digest() -> str:
     """What a recording depends on besides its scenario: the simulator's source code."""
-    return _source_digest(("sim", "data", "camera.py", "canbus"))
+    return _source_digest(("sim", "data", "camera.py", "canbus"), _NOT_RECORDING)
 
 
 def scenario_digest(cfg: ScenarioConfig, sim: str | None = None) -> str:

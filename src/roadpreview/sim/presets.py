@@ -181,7 +181,11 @@ def demo(seed: int = 0) -> ScenarioConfig:
         seed=seed,
         motion=motion,
         camera=CameraSpec(width=1280, height=720),
-        conditions=[ConditionSegment(kind="fog", start_s=36.0, end_s=46.0)],
+        conditions=[
+            ConditionSegment(
+                kind="fog", start_s=34.5, end_s=40.5, fog_density_per_m=0.2, ramp_s=1.0
+            )
+        ],
     )
 
 
