@@ -9,21 +9,47 @@ and its body moves 19 mm (heave) and 0.9 deg (pitch), so even the true compensat
 trajectory (truth.npz: rear-face row less f tan(pitch) and the camera's heave) has
 s = 0.55 px at the crossing, against 1.6-2.8 px for the bumps and the 1.0 px threshold.
 It is counted and shown as missed by `make demo`.
+
+The fog bank (34.5-40.5 s, 15 m visibility, 1 s fades) must take the texture away: the
+fusion falls back to IMU_ONLY inside it, says why, and is FUSED again once it lifts.
 """
 
 from __future__ import annotations
 
 import pytest
 
-from roadpreview.pipeline.replay import ReplayInputs, replay
+from roadpreview.fusion import FusionMode
+from roadpreview.pipeline.replay import ReplayInputs, ReplayResult, replay
+from roadpreview.sim.presets import demo
 
 
 @pytest.fixture(scope="module")
-def demo_run(make_recording):  # type: ignore[no-untyped-def]
+def demo_replay(make_recording) -> ReplayResult:  # type: ignore[no-untyped-def]
     rec = make_recording("demo", seed=0, duration_s=None, width=None, height=None)
-    result = replay(ReplayInputs.from_recording(rec.folder))
-    assert result.match is not None
-    return result.match
+    return replay(ReplayInputs.from_recording(rec.folder))
+
+
+@pytest.fixture(scope="module")
+def demo_run(demo_replay: ReplayResult):  # type: ignore[no-untyped-def]
+    assert demo_replay.match is not None
+    return demo_replay.match
+
+
+def test_demo_fog_bank_falls_back_to_the_imu_and_recovers(demo_replay: ReplayResult) -> None:
+    (fog,) = demo(0).conditions
+    modes = [(t - demo_replay.video_start_s, m, why) for t, m, why in demo_replay.mode_changes]
+    inside = [(t, why) for t, m, why in modes if m is FusionMode.IMU_ONLY]
+    # the texture goes within the fade-in, and the reason names it
+    assert any(fog.start_s <= t <= fog.start_s + 2 * fog.ramp_s for t, _ in inside), modes
+    assert any("texture" in why for t, why in inside if fog.start_s <= t <= fog.end_s), modes
+    # FUSED again within the fade-out plus the 0.3 s re-validation, and to the end
+    after = [(t, m) for t, m, _ in modes if t > fog.start_s]
+    back = [t for t, m in after if m is FusionMode.FUSED]
+    assert back, modes
+    assert fog.end_s - fog.ramp_s <= back[0] <= fog.end_s + 1.0, modes
+    assert after[-1][1] is FusionMode.FUSED, modes
+    # no IMU_ONLY outside the fog after the start-up
+    assert all(fog.start_s <= t <= fog.end_s for t, _ in inside if t > 3.0), modes
 
 
 def test_demo_raises_at_most_one_false_alarm_per_minute(demo_run) -> None:  # type: ignore[no-untyped-def]
