@@ -131,10 +131,6 @@ class VisionConfig:
         help="added in quadrature to the scaled std: the error floor of an increment (0.009"
         " deg at one frame apart on the wild drives, whatever std the estimator reports)",
     )
-
-    def variance(self, std: float) -> float:
-        """The variance of a visual increment whose estimator reports ``std`` (rad²)."""
-        return (self.std_scale * std) ** 2 + self.min_std_rad**2
     low_inlier_ratio: float = param(
         0.5,
         gt=0.0,
@@ -153,6 +149,10 @@ class VisionConfig:
         gt=0.0,
         help="a relative pitch beyond 20 ° is not a car's: treated as a failure",
     )
+
+    def variance(self, std: float) -> float:
+        """The variance of a visual increment whose estimator reports ``std`` (rad²)."""
+        return (self.std_scale * std) ** 2 + self.min_std_rad**2
 
 
 @dataclass(frozen=True)

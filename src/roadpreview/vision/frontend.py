@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Generator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -122,7 +122,10 @@ class VisionFrontEnd:
         if self.config.finder == "motion":
             options.setdefault("small_width_px", self.config.small_width_px)
         self.finder: LeadFinder = finder or make_finder(self.config.finder, camera, **options)
-        self.tracker = LeadVehicleTracker(camera, self.config.tracker)
+        tracker_cfg = self.config.tracker
+        if self.config.finder == "box":  # the user's box is the lead, however near
+            tracker_cfg = replace(tracker_cfg, min_distance_m=0.0)
+        self.tracker = LeadVehicleTracker(camera, tracker_cfg)
         self.background = BackgroundTracker(self.config.background)
         self._clock = clock
         self.reset()

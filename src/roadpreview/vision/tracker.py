@@ -89,7 +89,8 @@ class LeadTrackerConfig:
         " the lead (a vehicle tracked already may come closer). What the motion finder reports"
         " there is road: entering a fog bank, or with the horizon off, it boxed the road below a"
         " real lead at 17-23 m as an 'obstacle' at 1-4.3 m, which the centre rule prefers (the"
-        " nearest box); a 720p camera at 1.3 m with f = 706 px sees the road from 2.5 m on",
+        " nearest box); a 720p camera at 1.3 m with f = 706 px sees the road from 2.5 m on."
+        " 0 with the box finder: the user's box is the lead",
     )
     match_iou: float = param(0.3, gt=0.0, le=1.0, help="a detection this close is the target")
     max_box_width_frac: float = param(
@@ -214,8 +215,7 @@ def choose_target(
     min_distance_m: float = 0.0,
 ) -> int | None:
     """Index of the detection nearest the image centre, below the horizon and no nearer than
-    ``min_distance_m`` on the flat road (its bottom row; the box finder's ``user`` box is
-    taken as given); None if none."""
+    ``min_distance_m`` on the flat road (its bottom row); None if none."""
     column = camera.fx * camera.t[0] / camera.t[2] + camera.cx
     # rows below horizon_v + f h / d_min are nearer than d_min on a flat road
     lowest = (
@@ -227,9 +227,7 @@ def choose_target(
     for i, d in enumerate(detections):  # a handful of detections
         if classes is not None and d.class_name not in classes:
             continue
-        if d.width < min_box_px or d.height < min_box_px or d.box[3] <= horizon_v:
-            continue
-        if d.box[3] > lowest and d.class_name != "user":  # (the user's box is the lead)
+        if d.width < min_box_px or d.height < min_box_px or not horizon_v < d.box[3] <= lowest:
             continue
         key = target_key(d, column, tolerance)
         if best is None or key < best[0]:
