@@ -59,10 +59,11 @@ def test_a_bump_of_known_height_at_known_distance(make_trajectory: Any) -> None:
     assert alert.severity_px == pytest.approx(1.5, rel=1e-9)
     assert alert.height_mm == pytest.approx(60.0, rel=1e-9)
     assert alert.distance_m == pytest.approx(20.0)
-    assert alert.time_to_arrival_s == pytest.approx(2.0)  # 20 m at 10 m/s
+    # 20 m at 10 m/s, less the 0.2 m the ego's front axle is ahead of its camera
+    assert alert.time_to_arrival_s == pytest.approx(1.98)
     assert alert.t_s == pytest.approx(2.0)
-    assert alert.arrival_t_s == pytest.approx(4.0)
-    assert alert.time_left_s(alert.t_emit_s) == pytest.approx(4.0 - alert.t_emit_s)
+    assert alert.arrival_t_s == pytest.approx(3.98)
+    assert alert.time_left_s(alert.t_emit_s) == pytest.approx(3.98 - alert.t_emit_s)
     assert alert.side == Side.BOTH
     assert alert.mode == FusionMode.FUSED
     plain = AlertBuilder(signal=SignalModel(focal_px=f)).build(event)

@@ -312,15 +312,22 @@ def test_config_from_toml_names_the_file_and_field(tmp_path: Path) -> None:
 def test_anomaly_table_round_trips_through_toml(tmp_path: Path) -> None:
     path = tmp_path / "roadpreview.toml"
     path.write_text(
-        "[anomaly.detector]\nthreshold_mode = 'distance'\n"
-        "[anomaly.detector.signal]\nfocal_px = 910.0\n"
+        "[anomaly]\ndetector = 'std'\n"
+        "[anomaly.std]\nthreshold_mode = 'distance'\n"
+        "[anomaly.std.signal]\nfocal_px = 910.0\n"
+        "[anomaly.two_axle]\nthreshold_z = 6.0\n"
         "[anomaly.alert]\nmin_speed_mps = 1.0\n"
     )
     cfg = load(AnomalyConfig, path, table="anomaly")
-    assert cfg.detector.signal.focal_px == 910.0
+    assert cfg.detector == "std"
+    assert cfg.std.signal.focal_px == 910.0
+    assert cfg.two_axle.threshold_z == 6.0
     assert cfg.alert.min_speed_mps == 1.0
     save(cfg, tmp_path / "out.toml")
     assert load(AnomalyConfig, tmp_path / "out.toml") == cfg
-    path.write_text("[anomaly.detector]\nthreshold_mode = 'distance'\n")
-    with pytest.raises(ConfigError, match=r"anomaly\.detector\.threshold_mode.*focal_px"):
+    path.write_text("[anomaly.std]\nthreshold_mode = 'distance'\n")
+    with pytest.raises(ConfigError, match=r"anomaly\.std\.threshold_mode.*focal_px"):
+        load(AnomalyConfig, path, table="anomaly")
+    path.write_text("[anomaly]\ndetector = 'cusum'\n")
+    with pytest.raises(ConfigError, match=r"anomaly\.detector.*two-axle"):
         load(AnomalyConfig, path, table="anomaly")

@@ -17,6 +17,9 @@ from roadpreview.canbus.dbc import (
     IMU_RATES,
     RESERVED_OUTPUT_IDS,
     RP_ALERT,
+    RP_ALERT_DETAIL,
+    RP_CONFIRM,
+    RP_ROAD_STATUS,
     RP_STATUS,
     VEHICLE_SPEED,
     WHEEL_SPEEDS,
@@ -106,7 +109,13 @@ def test_loads_strict_with_cantools(db: Database) -> None:
 
 def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> None:
     inputs = {IMU_RATES: 0x130, IMU_ACCEL: 0x131, VEHICLE_SPEED: 0x140, WHEEL_SPEEDS: 0x141}
-    outputs = {RP_ALERT: 0x200, RP_STATUS: 0x201}
+    outputs = {
+        RP_ALERT: 0x200,
+        RP_STATUS: 0x201,
+        RP_ROAD_STATUS: 0x202,
+        RP_ALERT_DETAIL: 0x203,
+        RP_CONFIRM: 0x204,
+    }
     assert {m.name: m.frame_id for m in db.messages} == inputs | outputs
     for m in db.messages:
         assert not m.is_extended_frame
@@ -121,6 +130,7 @@ def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> Non
             assert m.senders == ["ROADPREVIEW"]
         assert m.length == 8
         assert m.comment
+        assert sum(s.length for s in m.signals) <= 64
         layout = e2e_layout(m)
         assert layout.data_id == m.frame_id
         for s in m.signals:
@@ -130,17 +140,98 @@ def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> Non
             if s.scale != 1:
                 assert s.unit, f"{m.name}.{s.name} has no unit"
             assert s.byte_order == "little_endian"
-    assert db.get_message_by_name(RP_STATUS).cycle_time == 100
-    assert db.get_message_by_name(RP_ALERT).send_type == "Event"
+    for cyclic in (RP_STATUS, RP_ROAD_STATUS):
+        assert db.get_message_by_name(cyclic).cycle_time == 100
+        assert db.get_message_by_name(cyclic).send_type == "Cyclic"
+    for event in (RP_ALERT, RP_ALERT_DETAIL, RP_CONFIRM):
+        assert db.get_message_by_name(event).send_type == "Event"
+        assert not db.get_message_by_name(event).cycle_time
+
+
+def test_the_top_comment_lists_every_output_id() -> None:
+    text = REPO_DBC.read_text()
+    top = next(line for line in text.splitlines() if line.startswith('CM_ "'))
+    for name, fid in (
+        (RP_ALERT, 0x200),
+        (RP_STATUS, 0x201),
+        (RP_ROAD_STATUS, 0x202),
+        (RP_ALERT_DETAIL, 0x203),
+        (RP_CONFIRM, 0x204),
+    ):
+        assert f"0x{fid:03X} {name}" in top, name
+
+
+# the output layouts a chassis ECU is built against: (start, length, signed, scale, min, max,
+# raw value meaning "not available" or None)
+OUTPUT_LAYOUTS = {
+    RP_ALERT: {
+        "AlertSide": (12, 2, False, 1, 0, 3, None),
+        "AlertFusionMode": (14, 2, False, 1, 0, 3, None),
+        "AlertId": (16, 8, False, 1, 0, 255, None),
+        "AlertDistance": (24, 10, False, 0.2, 0, 204.4, 1023),
+        "AlertTimeToArrival": (34, 10, False, 0.02, 0, 20.44, 1023),
+        "AlertHeight": (44, 9, True, 2, -510, 510, -256),
+        "AlertConfidence": (53, 6, False, 2, 0, 100, 63),
+        "AlertEventAge": (59, 5, False, 0.1, 0, 3.0, 31),
+    },
+    RP_ALERT_DETAIL: {
+        "DetailDetector": (12, 2, False, 1, 0, 1, None),
+        "AlertId": (16, 8, False, 1, 0, 255, None),
+        "AlertHeightStd": (24, 6, False, 2, 0, 124, 63),
+        "AlertLength": (30, 8, False, 0.05, 0, 12.7, 255),
+        "AlertScore": (38, 8, False, 0.2, 0, 50.8, 255),
+        "AlertLeadSpeed": (46, 8, False, 0.5, 0, 127, 255),
+    },
+    RP_CONFIRM: {
+        "ConfirmOutcome": (12, 2, False, 1, 0, 2, None),
+        "ConfirmAlertId": (16, 8, False, 1, 0, 255, None),
+        "ConfirmPeakAccel": (24, 10, False, 0.02, 0, 20.44, 1023),
+        "ConfirmBackgroundAccel": (34, 8, False, 0.02, 0, 5.08, 255),
+        "ConfirmArrivalAge": (42, 8, False, 0.02, 0, 5.08, 255),
+        "ConfirmPrecision": (50, 7, False, 1, 0, 100, 127),
+    },
+    RP_ROAD_STATUS: {
+        "RoadClass": (12, 4, False, 1, 0, 8, None),
+        "RoadClassEgo": (16, 4, False, 1, 0, 8, None),
+        "RoadClassLead": (20, 4, False, 1, 0, 8, None),
+        "RoadGdEgo": (24, 8, False, 0.25, 0, 63.5, 255),
+        "RoadGdLead": (32, 8, False, 0.25, 0, 63.5, 255),
+        "OnlinePrecision": (40, 7, False, 1, 0, 100, 127),
+        "ConfirmedCount": (47, 8, False, 1, 0, 255, None),
+        "NotFeltCount": (55, 8, False, 1, 0, 255, None),
+    },
+}
+
+
+@pytest.mark.parametrize("name", sorted(OUTPUT_LAYOUTS))
+def test_output_layouts_are_as_specified(db: Database, name: str) -> None:
+    m = db.get_message_by_name(name)
+    e2e = {s.name for s in m.signals if s.name.endswith(("_CRC", "_Counter"))}
+    assert len(e2e) == 2
+    assert {s.name for s in m.signals} - e2e == set(OUTPUT_LAYOUTS[name])
+    for signal, (start, length, signed, scale, lo, hi, na) in OUTPUT_LAYOUTS[name].items():
+        s = m.get_signal_by_name(signal)
+        got = (s.start, s.length, s.is_signed, s.scale, s.minimum, s.maximum)
+        assert got == pytest.approx((start, length, signed, scale, lo, hi)), signal
+        named = {int(k): str(v) for k, v in (s.choices or {}).items()}
+        if na is None:
+            assert "SignalNotAvailable" not in named.values(), signal
+        else:
+            assert named.get(na) == "SignalNotAvailable", signal
+            assert na not in range(round(lo / scale), round(hi / scale) + 1), signal
 
 
 def test_every_message_and_signal_is_in_the_interface_doc(db: Database) -> None:
+    """Each message has its section, whose table has a row per signal with its layout."""
     doc = (ROOT / "docs" / "can-interface.md").read_text(encoding="utf-8")
     for m in db.messages:
         assert m.name in doc
-        assert f"0x{m.frame_id:03X}" in doc
+        heading = f"### 0x{m.frame_id:03X} `{m.name}`"
+        assert heading in doc, heading
+        section = doc.split(heading, 1)[1].split("\n### ", 1)[0]
         for s in m.signals:
-            assert f"`{s.name}`" in doc, s.name
+            row = f"| `{s.name}` | {s.start} | {s.length} | "
+            assert row in section, f"{m.name}.{s.name}: no row {row!r} in its section"
 
 
 def test_pitch_rate_sign_is_documented_in_the_dbc(db: Database) -> None:
@@ -152,9 +243,7 @@ def test_pitch_rate_sign_is_documented_in_the_dbc(db: Database) -> None:
 
 def test_a_broken_dbc_is_reported_with_its_path(tmp_path: Path) -> None:
     bad = tmp_path / "bad.dbc"
-    bad.write_text(
-        REPO_DBC.read_text().replace("SG_ PitchRate : 32|16", "SG_ PitchRate : 30|16")
-    )
+    bad.write_text(REPO_DBC.read_text().replace("SG_ PitchRate : 32|16", "SG_ PitchRate : 30|16"))
     with pytest.raises(InputDataError, match=r"bad\.dbc"):
         load_database(bad)
 
@@ -235,8 +324,9 @@ def test_speed_frames_decode_to_the_samples(db: Database, speed_samples: SpeedSa
     np.testing.assert_allclose(kmh, speed_samples.speed_m_s / KMH, rtol=0, atol=0.01)
     assert [d["MovingDirection"] for d in speed] == list(speed_samples.direction)
     assert {0, 1} <= set(speed_samples.direction.tolist())
-    got_w = np.array([[d[f"WheelSpeed{w}"] for w in ("FL", "FR", "RL", "RR")] for d in wheels],
-                     dtype=float)
+    got_w = np.array(
+        [[d[f"WheelSpeed{w}"] for w in ("FL", "FR", "RL", "RR")] for d in wheels], dtype=float
+    )
     np.testing.assert_allclose(got_w, speed_samples.wheel_speeds_m_s / KMH, rtol=0, atol=0.03125)
     assert got_w.max() > 240
     _assert_counters(speed, "VehicleSpeed_Counter")

@@ -1,16 +1,20 @@
-"""Live CAN on python-can's virtual bus: alerts and periodic status between two bus objects."""
+"""Live CAN on python-can's virtual bus: alerts, confirmations and the periodic status messages
+between two bus objects."""
 
 from __future__ import annotations
 
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TypeVar
 
 import can
 import pytest
 
 from roadpreview.anomaly import Alert, Side, SuppressionReason
+from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult
+from roadpreview.anomaly.roughness import RoadState
 from roadpreview.canbus import (
     BoundedQueueListener,
     CanInputDecoder,
@@ -18,6 +22,10 @@ from roadpreview.canbus import (
     CanReceiver,
     OutputDecoder,
     ReceivedAlert,
+    ReceivedAlertDetail,
+    ReceivedConfirm,
+    ReceivedOutput,
+    ReceivedRoadStatus,
     ReceivedStatus,
     Status,
     decode_log,
@@ -31,6 +39,8 @@ from roadpreview.canbus import (
 from roadpreview.errors import ConfigError
 from roadpreview.fusion.mode import FusionMode
 
+T = TypeVar("T")
+
 
 @pytest.fixture
 def buses() -> Iterator[tuple[can.BusABC, can.BusABC]]:
@@ -42,10 +52,12 @@ def buses() -> Iterator[tuple[can.BusABC, can.BusABC]]:
     rx.shutdown()
 
 
-def _receive(receiver: CanReceiver, decoder: OutputDecoder, want: int) -> list[object]:
-    """Decode frames until ``want`` decoded ones arrived (or 5 s without a frame)."""
-    out: list[object] = []
-    while len(out) < want:
+def _receive_until(
+    receiver: CanReceiver, decoder: OutputDecoder, done: Callable[[list[ReceivedOutput]], bool]
+) -> list[ReceivedOutput]:
+    """Decode frames until ``done(decoded so far)`` (or 5 s without a frame)."""
+    out: list[ReceivedOutput] = []
+    while not done(out):
         msg = receiver.recv(timeout=5.0)
         if msg is None:
             break
@@ -53,6 +65,10 @@ def _receive(receiver: CanReceiver, decoder: OutputDecoder, want: int) -> list[o
         if decoded is not None:
             out.append(decoded)
     return out
+
+
+def _of(kind: type[T], got: list[ReceivedOutput]) -> list[T]:
+    return [g for g in got if isinstance(g, kind)]
 
 
 def test_alerts_and_status_from_one_bus_object_to_another(
@@ -65,10 +81,22 @@ def test_alerts_and_status_from_one_bus_object_to_another(
         distance_m=32.4,
         time_to_arrival_s=2.16,
         severity_px=3.4,
-        height_mm=48.0,
+        height_mm=-48.0,  # a pothole
         side=Side.RIGHT,
         confidence=0.82,
         mode=FusionMode.VISUAL_ONLY,
+        alert_id=259,
+        height_std_mm=12.0,
+        length_m=0.6,
+        lead_speed_mps=15.0,
+    )
+    confirmation = ConfirmationResult(
+        alert_id=259,
+        outcome=Confirmation.CONFIRMED,
+        t_s=14.0,
+        t_arrival_s=13.1,
+        peak_mps2=4.2,
+        background_mps2=0.8,
     )
     status = Status(
         mode=FusionMode.FUSED,
@@ -79,47 +107,90 @@ def test_alerts_and_status_from_one_bus_object_to_another(
         suppressed=SuppressionReason.NONE,
         alerts_sent=1,
         frames_processed=123,
+        road=RoadState("C", 300e-6, "C", 300e-6, "B", 100e-6),
+        precision=0.75,
+        confirmed=1,
+        not_felt=0,
     )
     decoder = OutputDecoder()
+
+    def five_each(got: list[ReceivedOutput]) -> bool:
+        return len(_of(ReceivedStatus, got)) >= 5 and len(_of(ReceivedRoadStatus, got)) >= 5
+
     with CanReceiver(rx) as receiver:
-        out = CanOutput(tx, keep_sent=True)
-        out.send_alert(alert)
+        out = CanOutput(tx, keep_sent=True, detector="std")
+        sent = out.send_alert(alert)
+        out.send_confirmation(confirmation, 0.75)
         out.start_status(status, period_s=0.01)
-        statuses = _receive(receiver, decoder, 1 + 5)
+        got = _receive_until(receiver, decoder, five_each)
         out.update_status(Status(mode=FusionMode.DEGRADED, frames_processed=124))
-        later: list[object] = []
-        while not any(
-            isinstance(s, ReceivedStatus) and s.mode == FusionMode.DEGRADED for s in later
-        ):
-            got = _receive(receiver, decoder, 1)
-            assert got, "the updated status never arrived"
-            later += got
+        later = _receive_until(
+            receiver,
+            decoder,
+            lambda g: (
+                any(s.mode == FusionMode.DEGRADED for s in _of(ReceivedStatus, g))
+                and any(r.iso_class is None for r in _of(ReceivedRoadStatus, g))
+            ),
+        )
         out.stop()
-    first, *periodic = statuses
+    assert [m.arbitration_id for m in sent] == [0x200, 0x203]  # RP_ALERT, then its details
+    first, detail, confirm = got[:3]
     assert isinstance(first, ReceivedAlert)
+    assert first.alert_id == 259 % 256
     assert first.distance_m == pytest.approx(32.4, abs=0.1)
     assert first.time_to_arrival_s == pytest.approx(2.16, abs=0.01)
-    assert first.event_age_s == pytest.approx(1.0, abs=0.025)
-    assert first.severity_px == pytest.approx(3.4, abs=0.1)
-    assert first.height_mm == pytest.approx(48.0, abs=1.0)
+    assert first.event_age_s == pytest.approx(1.0, abs=0.05)
+    assert first.height_mm == pytest.approx(-48.0, abs=1.0)
     assert first.side == Side.RIGHT
     assert first.mode == FusionMode.VISUAL_ONLY
-    assert first.confidence == pytest.approx(0.82, abs=0.01)
-    assert all(isinstance(s, ReceivedStatus) for s in periodic)
-    assert [s.counter for s in periodic] == list(range(5))  # type: ignore[attr-defined]
+    assert first.confidence == pytest.approx(0.82, abs=0.005)
+    assert isinstance(detail, ReceivedAlertDetail)
+    assert detail.alert_id == first.alert_id
+    assert detail.detector == "std"
+    assert detail.score == pytest.approx(3.4, abs=0.1)
+    assert detail.height_std_mm == pytest.approx(12.0, abs=1.0)
+    assert detail.length_m == pytest.approx(0.6, abs=0.025)
+    assert detail.lead_speed_mps == pytest.approx(15.0, abs=0.25 / 3.6)
+    assert isinstance(confirm, ReceivedConfirm)
+    assert confirm.alert_id == first.alert_id
+    assert confirm.outcome == Confirmation.CONFIRMED
+    assert confirm.peak_mps2 == pytest.approx(4.2, abs=0.01)
+    assert confirm.background_mps2 == pytest.approx(0.8, abs=0.01)
+    assert confirm.arrival_age_s == pytest.approx(0.9, abs=0.01)
+    assert confirm.precision == pytest.approx(0.75, abs=0.005)
+    periodic = _of(ReceivedStatus, got)
+    roads = _of(ReceivedRoadStatus, got)
+    assert len(got) == 3 + len(periodic) + len(roads)
+    assert [s.counter for s in periodic[:5]] == list(range(5))
+    assert [r.counter for r in roads[:5]] == list(range(5))
     s0 = periodic[0]
-    assert isinstance(s0, ReceivedStatus)
     assert s0.pitch_rad == pytest.approx(0.01, abs=0.0025 * 3.1416 / 180)
     assert s0.texture_quality == pytest.approx(0.7)
     assert s0.time_offset_s == pytest.approx(0.042)
     assert s0.heartbeat == 123 % 8
-    last = later[-1]
-    assert isinstance(last, ReceivedStatus)
+    r0 = roads[0]
+    assert (r0.iso_class, r0.ego_class, r0.lead_class) == ("C", "C", "B")
+    assert r0.ego_gd_n0 == pytest.approx(300e-6, rel=0.03)  # 0.125 dB is 3 %
+    assert r0.lead_gd_n0 == pytest.approx(100e-6, rel=0.03)
+    assert r0.precision == pytest.approx(0.75, abs=0.005)
+    assert (r0.confirmed, r0.not_felt) == (1, 0)
+    last = _of(ReceivedStatus, later)[-1]
     assert last.pitch_rad is None  # not available
+    last_road = _of(ReceivedRoadStatus, later)[-1]
+    assert last_road.iso_class is None
+    assert last_road.precision is None
     assert decoder.problems == {}
     assert decoder.lost == 0
     assert receiver.dropped == 0
-    assert [m.arbitration_id for m in out.sent[:2]] == [0x200, 0x201]
+    assert [m.arbitration_id for m in out.sent[:3]] == [0x200, 0x203, 0x204]
+    assert {m.arbitration_id for m in out.sent[3:]} == {0x201, 0x202}
+
+
+def test_an_unknown_detector_fails_when_the_output_is_built(
+    buses: tuple[can.BusABC, can.BusABC],
+) -> None:
+    with pytest.raises(ConfigError, match="'cnn'"):
+        CanOutput(buses[0], detector="cnn")
 
 
 def test_sent_frames_can_be_logged(buses: tuple[can.BusABC, can.BusABC], tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -127,11 +198,15 @@ def test_sent_frames_can_be_logged(buses: tuple[can.BusABC, can.BusABC], tmp_pat
     out = CanOutput(tx, keep_sent=True)
     for k in range(3):
         out.send_status(Status(mode=FusionMode.FUSED, alerts_sent=k), timestamp=1.7e9 + 0.1 * k)
+        out.send_road_status(
+            Status(mode=FusionMode.FUSED, confirmed=k, not_felt=2 * k), timestamp=1.7e9 + 0.1 * k
+        )
     path = tmp_path / "status.blf"
-    assert write_can_log(path, out.sent) == 3
+    assert write_can_log(path, out.sent) == 6
     decoder = OutputDecoder()
     back = [decoder.decode(m) for m in read_can_log(path, errors="raise")]
-    assert [b.alert_count for b in back] == [0, 1, 2]  # type: ignore[union-attr]
+    assert [b.alert_count for b in back[::2]] == [0, 1, 2]  # type: ignore[union-attr]
+    assert [(b.confirmed, b.not_felt) for b in back[1::2]] == [(0, 0), (1, 2), (2, 4)]  # type: ignore[union-attr]
 
 
 def test_the_listener_only_queues_and_counts_what_it_drops(

@@ -1,8 +1,10 @@
-"""RP_ALERT / RP_STATUS: cantools (strict) decodes what we encode, E2E counters and CRCs check."""
+"""roadpreview's outputs (RP_ALERT, RP_ALERT_DETAIL, RP_CONFIRM, RP_STATUS, RP_ROAD_STATUS):
+cantools (strict) and `OutputDecoder` decode what we encode, E2E counters and CRCs check."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import cantools
@@ -12,24 +14,39 @@ import pytest
 from cantools.database.can import Database
 
 from roadpreview.anomaly import Alert, Side, SuppressionReason
+from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult
+from roadpreview.anomaly.roughness import ISO8608_CLASSES, ISO8608_GD_N0, RoadState
 from roadpreview.canbus import (
+    DETECTOR_CODES,
     E2E_COUNTER_MODULUS,
     RP_ALERT,
+    RP_ALERT_DETAIL,
+    RP_CONFIRM,
+    RP_ROAD_STATUS,
     RP_STATUS,
+    AlertDetailEncoder,
     AlertEncoder,
+    ConfirmEncoder,
     OutputDecoder,
     ReceivedAlert,
+    ReceivedAlertDetail,
+    ReceivedConfirm,
+    ReceivedRoadStatus,
     ReceivedStatus,
+    RoadStatusEncoder,
     Status,
     StatusEncoder,
     alert_frames,
     read_can_log,
     write_can_log,
 )
+from roadpreview.errors import ConfigError
 from roadpreview.fusion.mode import FusionMode
 
 REPO_DBC = Path(__file__).resolve().parents[2] / "data" / "roadpreview.dbc"
 DEG = math.pi / 180
+KMH = 1 / 3.6
+NA = "SignalNotAvailable"
 
 
 @pytest.fixture(scope="module")
@@ -48,17 +65,52 @@ def _random_alerts(n: int, seed: int = 0) -> list[Alert]:
         out.append(
             Alert(
                 t_s=t,
-                t_emit_s=t + float(rng.uniform(0, 3.1)),
+                t_emit_s=t + float(rng.uniform(0, 1.4)),
                 distance_m=float(rng.uniform(0, 204.4)),
                 time_to_arrival_s=float(rng.uniform(0, 20.44)),
-                severity_px=float(rng.uniform(0, 51)),
-                height_mm=float(rng.uniform(0, 508)),
+                severity_px=float(rng.uniform(0, 50.8)),
+                height_mm=float(rng.uniform(-510, 510)),
                 side=Side(int(rng.integers(0, 4))),
                 confidence=float(rng.uniform(0, 1)),
                 mode=FusionMode(int(rng.integers(0, 4))),
+                alert_id=k + 1 + 250 * (k % 3),  # beyond 255 too: sent modulo 256
+                height_std_mm=float(rng.uniform(0, 124)),
+                length_m=float(rng.uniform(0, 12.7)),
+                lead_speed_mps=float(rng.uniform(0, 127)) * KMH,
             )
         )
     return out
+
+
+def _random_confirmations(n: int, seed: int = 2) -> list[ConfirmationResult]:
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n):
+        t = 200.0 + k
+        out.append(
+            ConfirmationResult(
+                alert_id=k + 300,
+                outcome=Confirmation(int(rng.integers(0, 3))),
+                t_s=t,
+                t_arrival_s=t - float(rng.uniform(0, 5.08)),
+                peak_mps2=float(rng.uniform(0, 20.44)),
+                background_mps2=float(rng.uniform(0, 5.08)),
+            )
+        )
+    return out
+
+
+def _random_road(rng: np.random.Generator) -> RoadState:
+    ego = float(10 ** rng.uniform(-6, 0.3))  # 0 .. 63 dB re 1e-6 m^3
+    lead = float(10 ** rng.uniform(-6, 0.3))
+    return RoadState(
+        iso_class=ISO8608_CLASSES[int(rng.integers(0, 8))],
+        gd_n0=ego,
+        ego_class=ISO8608_CLASSES[int(rng.integers(0, 8))],
+        ego_gd_n0=ego,
+        lead_class=ISO8608_CLASSES[int(rng.integers(0, 8))],
+        lead_gd_n0=lead,
+    )
 
 
 def _random_statuses(n: int, seed: int = 1) -> list[Status]:
@@ -74,9 +126,17 @@ def _random_statuses(n: int, seed: int = 1) -> list[Status]:
             alerts_sent=int(rng.integers(0, 1000)),
             input_errors_total=int(rng.integers(0, 40)),
             frames_processed=int(rng.integers(0, 10**6)),
+            road=_random_road(rng),
+            precision=float(rng.uniform(0, 1)),
+            confirmed=int(rng.integers(0, 1000)),
+            not_felt=int(rng.integers(0, 1000)),
         )
         for _ in range(n)
     ]
+
+
+def _db_gd(gd_n0: float) -> float:
+    return 10 * math.log10(gd_n0 / 1e-6)
 
 
 def _lsb(db: Database, message: str, signal: str) -> float:
@@ -95,7 +155,6 @@ def test_alerts_decode_with_cantools_to_the_same_values(strict_db: Database) -> 
         want = {
             "AlertDistance": alert.distance_m,
             "AlertTimeToArrival": alert.time_to_arrival_s,
-            "AlertSeverity": alert.severity_px,
             "AlertHeight": alert.height_mm,
             "AlertConfidence": 100 * alert.confidence,
             "AlertEventAge": alert.t_emit_s - alert.t_s,
@@ -105,6 +164,108 @@ def test_alerts_decode_with_cantools_to_the_same_values(strict_db: Database) -> 
             assert got[name] == pytest.approx(value, abs=lsb / 2 + 1e-9), name
         assert got["AlertSide"] == int(alert.side)
         assert got["AlertFusionMode"] == int(alert.mode)
+        assert got["AlertId"] == alert.alert_id % 256
+        assert "AlertSeverity" not in got  # the score is in RP_ALERT_DETAIL now
+
+
+def test_alert_details_decode_with_cantools_to_the_same_values(strict_db: Database) -> None:
+    enc = AlertDetailEncoder()
+    msg_def = strict_db.get_message_by_name(RP_ALERT_DETAIL)
+    for k, alert in enumerate(_random_alerts(300, seed=3)):
+        detector = ("std", "two-axle")[k % 2]
+        frame = enc.encode(alert, detector)
+        assert (frame.arbitration_id, frame.dlc, frame.is_extended_id) == (0x203, 8, False)
+        assert frame.timestamp == alert.t_emit_s
+        got = msg_def.decode(frame.data, decode_choices=False)
+        assert alert.lead_speed_mps is not None
+        want = {
+            "AlertHeightStd": alert.height_std_mm,
+            "AlertLength": alert.length_m,
+            "AlertScore": alert.severity_px,
+            "AlertLeadSpeed": alert.lead_speed_mps / KMH,
+        }
+        for name, value in want.items():
+            lsb = _lsb(strict_db, RP_ALERT_DETAIL, name)
+            assert got[name] == pytest.approx(value, abs=lsb / 2 + 1e-9), name
+        assert got["AlertId"] == alert.alert_id % 256
+        assert got["DetailDetector"] == DETECTOR_CODES[detector]
+    assert str(msg_def.decode(enc.encode(alert, "std").data)["DetailDetector"]) == "STD"
+    assert str(msg_def.decode(enc.encode(alert).data)["DetailDetector"]) == "TWO_AXLE"
+
+
+def test_confirmations_decode_with_cantools_to_the_same_values(strict_db: Database) -> None:
+    enc = ConfirmEncoder()
+    msg_def = strict_db.get_message_by_name(RP_CONFIRM)
+    rng = np.random.default_rng(5)
+    for result in _random_confirmations(300):
+        precision = float(rng.uniform(0, 1))
+        frame = enc.encode(result, precision)
+        assert (frame.arbitration_id, frame.dlc, frame.is_extended_id) == (0x204, 8, False)
+        assert frame.timestamp == result.t_s  # decided at that frame
+        got = msg_def.decode(frame.data, decode_choices=False)
+        want = {
+            "ConfirmPeakAccel": result.peak_mps2,
+            "ConfirmBackgroundAccel": result.background_mps2,
+            "ConfirmArrivalAge": result.t_s - result.t_arrival_s,
+            "ConfirmPrecision": 100 * precision,
+        }
+        for name, value in want.items():
+            lsb = _lsb(strict_db, RP_CONFIRM, name)
+            assert got[name] == pytest.approx(value, abs=lsb / 2 + 1e-9), name
+        assert got["ConfirmOutcome"] == int(result.outcome)
+        assert got["ConfirmAlertId"] == result.alert_id % 256
+    # the age is counted to the frame's own time stamp
+    arrived = replace(result, t_arrival_s=result.t_s - 1.5)
+    later = msg_def.decode(enc.encode(arrived, timestamp=result.t_s + 1.0).data)
+    assert later["ConfirmArrivalAge"] == pytest.approx(2.5, abs=0.01)
+
+
+def test_road_statuses_decode_with_cantools_to_the_same_values(strict_db: Database) -> None:
+    enc = RoadStatusEncoder()
+    msg_def = strict_db.get_message_by_name(RP_ROAD_STATUS)
+    for status in _random_statuses(300, seed=6):
+        frame = enc.encode(status, timestamp=3.0)
+        assert (frame.arbitration_id, frame.dlc, frame.is_extended_id) == (0x202, 8, False)
+        got = msg_def.decode(frame.data, decode_choices=False)
+        road = status.road
+        assert road is not None
+        assert status.precision is not None
+        want = {
+            "RoadGdEgo": min(max(_db_gd(road.ego_gd_n0), 0.0), 63.5),
+            "RoadGdLead": min(max(_db_gd(road.lead_gd_n0), 0.0), 63.5),
+            "OnlinePrecision": 100 * status.precision,
+        }
+        for name, value in want.items():
+            lsb = _lsb(strict_db, RP_ROAD_STATUS, name)
+            assert got[name] == pytest.approx(value, abs=lsb / 2 + 1e-9), name
+        assert got["RoadClass"] == road.class_index
+        assert got["RoadClassEgo"] == ISO8608_CLASSES.index(road.ego_class or "") + 1
+        assert got["RoadClassLead"] == ISO8608_CLASSES.index(road.lead_class or "") + 1
+        assert got["ConfirmedCount"] == status.confirmed % 256
+        assert got["NotFeltCount"] == status.not_felt % 256
+
+
+def test_road_class_levels_on_can_are_the_iso_8608_classes(strict_db: Database) -> None:
+    """Each class's geometric-mean G_d(n0) goes out as its class and comes back within
+    0.125 dB; the DBC's value table names the classes."""
+    enc = RoadStatusEncoder()
+    rx = OutputDecoder()
+    msg_def = strict_db.get_message_by_name(RP_ROAD_STATUS)
+    for k, (name, gd) in enumerate(ISO8608_GD_N0.items()):
+        road = RoadState(name, gd, name, gd, name, gd)
+        frame = enc.encode(Status(mode=FusionMode.FUSED, road=road), timestamp=float(k))
+        assert str(msg_def.decode(frame.data)["RoadClass"]) == name
+        back = rx.decode(frame)
+        assert isinstance(back, ReceivedRoadStatus)
+        assert (back.iso_class, back.ego_class, back.lead_class) == (name, name, name)
+        assert back.ego_gd_n0 is not None
+        assert _db_gd(back.ego_gd_n0) == pytest.approx(_db_gd(gd), abs=0.125 + 1e-9)
+    choices = msg_def.get_signal_by_name("RoadClass").choices
+    assert choices is not None
+    assert {int(k): str(v) for k, v in choices.items()} == {
+        0: "UNKNOWN",
+        **{i + 1: c for i, c in enumerate(ISO8608_CLASSES)},
+    }
 
 
 def test_statuses_decode_with_cantools_to_the_same_values(strict_db: Database) -> None:
@@ -139,30 +300,144 @@ def test_unknown_values_are_signal_not_available_and_large_ones_saturate(
     strict_db: Database,
 ) -> None:
     enc = AlertEncoder()
+    detail = AlertDetailEncoder()
     alert = Alert(
         t_s=1.0,
-        t_emit_s=9.0,  # 8 s old: beyond 3.1 s
+        t_emit_s=9.0,  # 8 s old: beyond 3.0 s
         distance_m=None,
         time_to_arrival_s=None,
-        severity_px=80.0,  # beyond 51 px
+        severity_px=80.0,  # beyond 50.8
         height_mm=None,
         side=Side.LEFT,
         confidence=1.0,
         mode=FusionMode.IMU_ONLY,
+        alert_id=256 + 7,
     )
     got = strict_db.get_message_by_name(RP_ALERT).decode(enc.encode(alert).data)
-    assert str(got["AlertDistance"]) == "SignalNotAvailable"
-    assert str(got["AlertTimeToArrival"]) == "SignalNotAvailable"
-    assert str(got["AlertHeight"]) == "SignalNotAvailable"
-    assert got["AlertSeverity"] == pytest.approx(51.0)
-    assert got["AlertEventAge"] == pytest.approx(3.1)
+    assert str(got["AlertDistance"]) == NA
+    assert str(got["AlertTimeToArrival"]) == NA
+    assert str(got["AlertHeight"]) == NA
+    assert got["AlertEventAge"] == pytest.approx(3.0)
+    assert got["AlertConfidence"] == 100
+    assert got["AlertId"] == 7
     assert str(got["AlertSide"]) == "LEFT"
     assert str(got["AlertFusionMode"]) == "IMU_ONLY"
-    assert enc.saturated == {"AlertSeverity": 1, "AlertEventAge": 1}
+    assert enc.saturated == {"AlertEventAge": 1}
+    got = strict_db.get_message_by_name(RP_ALERT_DETAIL).decode(detail.encode(alert).data)
+    assert got["AlertScore"] == pytest.approx(50.8)
+    for name in ("AlertHeightStd", "AlertLength", "AlertLeadSpeed"):
+        assert str(got[name]) == NA, name
+    assert detail.saturated == {"AlertScore": 1}
+    # beyond the ranges: heights both ways, std, length, lead speed, confidence
+    big = replace(
+        alert,
+        t_emit_s=0.5,  # before the crossing: not a valid age
+        height_mm=900.0,
+        height_std_mm=300.0,
+        length_m=40.0,
+        lead_speed_mps=60.0,  # 216 km/h
+        confidence=float("nan"),
+        distance_m=500.0,
+        time_to_arrival_s=40.0,
+    )
+    got = strict_db.get_message_by_name(RP_ALERT).decode(enc.encode(big).data)
+    assert got["AlertHeight"] == 510
+    assert got["AlertDistance"] == pytest.approx(204.4)
+    assert got["AlertTimeToArrival"] == pytest.approx(20.44)
+    assert str(got["AlertConfidence"]) == NA
+    assert str(got["AlertEventAge"]) == NA
+    hole = replace(big, height_mm=-900.0)
+    assert (
+        strict_db.get_message_by_name(RP_ALERT).decode(enc.encode(hole).data)["AlertHeight"] == -510
+    )
+    got = strict_db.get_message_by_name(RP_ALERT_DETAIL).decode(detail.encode(big).data)
+    assert got["AlertHeightStd"] == 124
+    assert got["AlertLength"] == pytest.approx(12.7)
+    assert got["AlertLeadSpeed"] == 127
     status = StatusEncoder().encode(Status(mode=FusionMode.DEGRADED))
     got = strict_db.get_message_by_name(RP_STATUS).decode(status.data)
     for name in ("StatusPitch", "StatusGyroBias", "StatusTextureQuality", "StatusTimeOffset"):
-        assert str(got[name]) == "SignalNotAvailable", name
+        assert str(got[name]) == NA, name
+
+
+def test_a_pothole_goes_out_as_a_negative_height(strict_db: Database) -> None:
+    """Signed AlertHeight: -60 mm is raw -30 (two's complement in 9 bits), +60 mm raw +30."""
+    msg_def = strict_db.get_message_by_name(RP_ALERT)
+    base = _random_alerts(1, seed=8)[0]
+    enc = AlertEncoder()
+    rx = OutputDecoder()
+    for height, raw in ((-60.0, -30), (60.0, 30), (-4.0, -2), (-510.0, -255), (0.0, 0)):
+        alert = replace(base, height_mm=height)
+        frame = enc.encode(alert)
+        assert msg_def.decode(frame.data, scaling=False)["AlertHeight"] == raw
+        bits = (int.from_bytes(frame.data, "little") >> 44) & 0x1FF
+        assert bits == raw % 512  # the 9 bits on the wire
+        back = rx.decode(frame)
+        assert isinstance(back, ReceivedAlert)
+        assert back.height_mm == pytest.approx(height, abs=1.0)
+        assert back.height_mm is not None
+        assert (back.height_mm < 0) == (height < -1.0)
+
+
+def test_confirmation_and_road_status_not_available(strict_db: Database) -> None:
+    nan = float("nan")
+    never = ConfirmationResult(5, Confirmation.UNKNOWN, 30.0, nan, nan, nan)
+    frame = ConfirmEncoder().encode(never)
+    got = strict_db.get_message_by_name(RP_CONFIRM).decode(frame.data)
+    for name in ("ConfirmPeakAccel", "ConfirmBackgroundAccel", "ConfirmArrivalAge"):
+        assert str(got[name]) == NA, name
+    assert str(got["ConfirmPrecision"]) == NA  # no precision given
+    assert str(got["ConfirmOutcome"]) == "UNKNOWN"
+    back = OutputDecoder().decode(frame)
+    assert isinstance(back, ReceivedConfirm)
+    assert (back.peak_mps2, back.background_mps2, back.arrival_age_s, back.precision) == (
+        None,
+        None,
+        None,
+        None,
+    )
+    assert back.t_arrival_s is None
+    assert back.outcome == Confirmation.UNKNOWN
+    # beyond the ranges: saturate
+    hard = ConfirmationResult(6, Confirmation.CONFIRMED, 30.0, 20.0, 45.0, 9.0)
+    conf = ConfirmEncoder()
+    got = strict_db.get_message_by_name(RP_CONFIRM).decode(conf.encode(hard, 1.2).data)
+    assert got["ConfirmPeakAccel"] == pytest.approx(20.44)
+    assert got["ConfirmBackgroundAccel"] == pytest.approx(5.08)
+    assert got["ConfirmArrivalAge"] == pytest.approx(5.08)
+    assert got["ConfirmPrecision"] == 100
+    assert set(conf.saturated) == {
+        "ConfirmPeakAccel",
+        "ConfirmBackgroundAccel",
+        "ConfirmArrivalAge",
+        "ConfirmPrecision",
+    }
+    # a status at its defaults (what Pipeline.status() gives before it fills the road part)
+    road = RoadStatusEncoder().encode(Status(mode=FusionMode.FUSED))
+    got = strict_db.get_message_by_name(RP_ROAD_STATUS).decode(road.data)
+    for name in ("RoadClass", "RoadClassEgo", "RoadClassLead"):
+        assert str(got[name]) == "UNKNOWN", name
+    for name in ("RoadGdEgo", "RoadGdLead", "OnlinePrecision"):
+        assert str(got[name]) == NA, name
+    assert (got["ConfirmedCount"], got["NotFeltCount"]) == (0, 0)
+    back = OutputDecoder().decode(road)
+    assert back == ReceivedRoadStatus(0.0, 0, None, None, None, None, None, None, 0, 0)
+    # an estimate that is not positive has no level; out of range levels saturate
+    odd = RoadState("A", 0.0, None, 0.0, "H", 50.0)  # 50 m^3: 77 dB
+    got = strict_db.get_message_by_name(RP_ROAD_STATUS).decode(
+        RoadStatusEncoder().encode(Status(mode=FusionMode.FUSED, road=odd, confirmed=257)).data
+    )
+    assert str(got["RoadGdEgo"]) == NA
+    assert got["RoadGdLead"] == pytest.approx(63.5)
+    assert str(got["RoadClass"]) == "A"
+    assert str(got["RoadClassLead"]) == "H"
+    assert got["ConfirmedCount"] == 1
+
+
+def test_an_unknown_detector_name_is_a_config_error() -> None:
+    alert = _random_alerts(1)[0]
+    with pytest.raises(ConfigError, match="'cnn'"):
+        AlertDetailEncoder().encode(alert, "cnn")
 
 
 def test_enum_values_on_can_match_the_code(strict_db: Database) -> None:
@@ -171,6 +446,7 @@ def test_enum_values_on_can_match_the_code(strict_db: Database) -> None:
         (RP_ALERT, "AlertFusionMode", FusionMode),
         (RP_STATUS, "StatusFusionMode", FusionMode),
         (RP_ALERT, "AlertSide", Side),
+        (RP_CONFIRM, "ConfirmOutcome", Confirmation),
     ):
         choices = strict_db.get_message_by_name(message).get_signal_by_name(signal).choices
         assert choices is not None
@@ -179,24 +455,43 @@ def test_enum_values_on_can_match_the_code(strict_db: Database) -> None:
     assert supp.choices is not None
     assert str(supp.choices[int(SuppressionReason.LEAD_ACCEL)]) == "LEAD_ACCEL"
     assert str(supp.choices[int(SuppressionReason.DEGRADED)]) == "DEGRADED"
+    det = strict_db.get_message_by_name(RP_ALERT_DETAIL).get_signal_by_name("DetailDetector")
+    assert det.choices is not None
+    assert {str(v): int(k) for k, v in det.choices.items()} == {
+        name.upper().replace("-", "_"): code for name, code in DETECTOR_CODES.items()
+    }
 
 
 def test_e2e_counters_advance_and_crcs_check_with_autosar_e2e(strict_db: Database) -> None:
     enc = AlertEncoder()
     frames = alert_frames(_random_alerts(40), enc)
-    counters = [f.data[1] & 0x0F for f in frames]
-    assert counters == [k % E2E_COUNTER_MODULUS for k in range(40)]  # 0..14, 0..14, ...
-    for f in frames:
-        assert e2e.p01.e2e_p01_check(bytearray(f.data), 0x200)
-        assert not e2e.p01.e2e_p01_check(bytearray(f.data), 0x201)  # wrong data ID
+    alerts = [f for f in frames if f.arbitration_id == 0x200]
+    details = [f for f in frames if f.arbitration_id == 0x203]
+    assert len(alerts) == len(details) == 40
+    for own in (alerts, details):  # one counter per message
+        counters = [f.data[1] & 0x0F for f in own]
+        assert counters == [k % E2E_COUNTER_MODULUS for k in range(40)]  # 0..14, 0..14, ...
+    conf_enc = ConfirmEncoder()
+    confirms = [conf_enc.encode(c, 0.5) for c in _random_confirmations(20)]
+    assert [f.data[1] & 0x0F for f in confirms] == [k % 15 for k in range(20)]
     status = StatusEncoder()
-    sframes = [status.encode(s) for s in _random_statuses(20)]
+    road = RoadStatusEncoder()
+    statuses = _random_statuses(20)
+    sframes = [status.encode(s) for s in statuses]
+    rframes = [road.encode(s) for s in statuses]
     assert [f.data[1] & 0x0F for f in sframes] == [k % 15 for k in range(20)]
-    assert all(e2e.p01.e2e_p01_check(bytearray(f.data), 0x201) for f in sframes)
+    assert [f.data[1] & 0x0F for f in rframes] == [k % 15 for k in range(20)]
+    ids = {0x200: alerts, 0x201: sframes, 0x202: rframes, 0x203: details, 0x204: confirms}
+    for data_id, own in ids.items():
+        for f in own:
+            assert f.arbitration_id == data_id
+            assert e2e.p01.e2e_p01_check(bytearray(f.data), data_id)
+            for other in set(ids) - {data_id}:  # the same bytes under another data ID fail
+                assert not e2e.p01.e2e_p01_check(bytearray(f.data), other), (data_id, other)
 
 
 def test_a_corrupted_frame_fails_the_check_and_is_dropped_by_the_receiver() -> None:
-    frames = alert_frames(_random_alerts(6))
+    frames = [f for f in alert_frames(_random_alerts(6)) if f.arbitration_id == 0x200]
     rx = OutputDecoder()
     for i in range(8):
         for bit in (0x01, 0x10, 0x80):
@@ -219,10 +514,12 @@ def test_receiver_gets_back_what_was_sent() -> None:
     alert = _random_alerts(1, seed=4)[0]
     got = OutputDecoder().decode(AlertEncoder().encode(alert))
     assert isinstance(got, ReceivedAlert)
+    assert got.alert_id == alert.alert_id % 256
     assert got.distance_m == pytest.approx(alert.distance_m, abs=0.1)
     assert got.time_to_arrival_s == pytest.approx(alert.time_to_arrival_s, abs=0.01)
-    assert got.event_age_s == pytest.approx(alert.t_emit_s - alert.t_s, abs=0.025)
-    assert got.confidence == pytest.approx(alert.confidence, abs=0.01)
+    assert got.event_age_s == pytest.approx(alert.t_emit_s - alert.t_s, abs=0.05)
+    assert got.height_mm == pytest.approx(alert.height_mm, abs=1.0)
+    assert got.confidence == pytest.approx(alert.confidence, abs=0.005)
     assert got.side == alert.side
     assert got.mode == alert.mode
     assert got.time_left_s == pytest.approx(got.time_to_arrival_s - got.event_age_s)  # type: ignore[operator]
@@ -233,6 +530,57 @@ def test_receiver_gets_back_what_was_sent() -> None:
     assert back.pitch_rad == pytest.approx(status.pitch_rad, abs=0.0025 * DEG)
     assert back.time_offset_s == pytest.approx(status.time_offset_s, abs=0.0005)
     assert back.suppressed == status.suppressed
+
+
+def test_receiver_gets_back_details_confirmations_and_road_status() -> None:
+    rx = OutputDecoder()
+    enc = AlertDetailEncoder()
+    for k, alert in enumerate(_random_alerts(50, seed=10)):
+        detector = ("std", "two-axle")[k % 2]
+        d = rx.decode(enc.encode(alert, detector))
+        assert isinstance(d, ReceivedAlertDetail)
+        assert d.alert_id == alert.alert_id % 256
+        assert d.detector == detector
+        assert d.t_rx_s == alert.t_emit_s
+        assert d.height_std_mm == pytest.approx(alert.height_std_mm, abs=1.0)
+        assert d.length_m == pytest.approx(alert.length_m, abs=0.025)
+        assert d.score == pytest.approx(alert.severity_px, abs=0.1)
+        assert d.lead_speed_mps == pytest.approx(alert.lead_speed_mps, abs=0.25 * KMH)
+    conf = ConfirmEncoder()
+    for k, result in enumerate(_random_confirmations(50, seed=11)):
+        precision = k / 49
+        c = rx.decode(conf.encode(result, precision))
+        assert isinstance(c, ReceivedConfirm)
+        assert c.alert_id == result.alert_id % 256
+        assert c.outcome == result.outcome
+        assert c.t_rx_s == result.t_s
+        assert c.peak_mps2 == pytest.approx(result.peak_mps2, abs=0.01)
+        assert c.background_mps2 == pytest.approx(result.background_mps2, abs=0.01)
+        assert c.arrival_age_s == pytest.approx(result.t_s - result.t_arrival_s, abs=0.01)
+        assert c.t_arrival_s == pytest.approx(result.t_arrival_s, abs=0.01)
+        assert c.precision == pytest.approx(precision, abs=0.005)
+    road = RoadStatusEncoder()
+    for k, status in enumerate(_random_statuses(50, seed=12)):
+        r = rx.decode(road.encode(status, timestamp=float(k)))
+        assert isinstance(r, ReceivedRoadStatus)
+        assert status.road is not None
+        assert r.t_rx_s == float(k)
+        assert (r.iso_class, r.ego_class, r.lead_class) == (
+            status.road.iso_class,
+            status.road.ego_class,
+            status.road.lead_class,
+        )
+        for got_gd, sent_gd in (
+            (r.ego_gd_n0, status.road.ego_gd_n0),
+            (r.lead_gd_n0, status.road.lead_gd_n0),
+        ):
+            assert got_gd is not None
+            want_db = min(max(_db_gd(sent_gd), 0.0), 63.5)
+            assert _db_gd(got_gd) == pytest.approx(want_db, abs=0.125 + 1e-9)
+        assert r.precision == pytest.approx(status.precision, abs=0.005)
+        assert (r.confirmed, r.not_felt) == (status.confirmed % 256, status.not_felt % 256)
+    assert rx.problems == {}
+    assert rx.lost == 0
 
 
 @pytest.mark.parametrize("suffix", [".blf", ".asc", ".log", ".trc", ".csv"])
@@ -248,13 +596,18 @@ def test_alerts_written_to_a_log_read_back(tmp_path: Path, suffix: str) -> None:
         )
         for k, a in enumerate(alerts)
     ]
-    frames = alert_frames(alerts)
+    frames = alert_frames(alerts, detector="std")
     path = tmp_path / f"alerts{suffix}"
-    assert write_can_log(path, frames) == 20
+    assert write_can_log(path, frames) == 40
     rx = OutputDecoder()
     back = [rx.decode(m) for m in read_can_log(path, errors="raise")]
-    assert all(isinstance(b, ReceivedAlert) for b in back)
-    assert [b.t_rx_s for b in back] == pytest.approx([a.t_emit_s for a in alerts], abs=2e-6)  # type: ignore[union-attr]
+    # RP_ALERT, then its RP_ALERT_DETAIL with the same id, for each alert in order
+    assert [type(b) for b in back] == [ReceivedAlert, ReceivedAlertDetail] * 20
+    heads, details = back[::2], back[1::2]
+    assert [b.t_rx_s for b in heads] == pytest.approx([a.t_emit_s for a in alerts], abs=2e-6)  # type: ignore[union-attr]
+    assert [b.alert_id for b in heads] == [a.alert_id % 256 for a in alerts]  # type: ignore[union-attr]
+    assert [b.alert_id for b in details] == [a.alert_id % 256 for a in alerts]  # type: ignore[union-attr]
+    assert {b.detector for b in details} == {"std"}  # type: ignore[union-attr]
     assert rx.problems == {}
 
 

@@ -14,6 +14,7 @@ import pytest
 from roadpreview.errors import ConfigError
 from roadpreview.eval.clips import (
     SCORE_WINDOW_S,
+    Scores,
     background_windows,
     box_iou,
     clip_scores,
@@ -25,7 +26,6 @@ from roadpreview.eval.methods import METHODS, method_config, select_methods
 from roadpreview.eval.runner import (
     MethodSet,
     RecordingJob,
-    Trace,
     load_traces,
     process_recording,
     run_methods,
@@ -37,8 +37,8 @@ from roadpreview.sim.presets import controlled
 
 
 # -- clip scores ---------------------------------------------------------------------------------
-def _trace(t: np.ndarray, s: np.ndarray) -> Trace:
-    return Trace(method="x", columns={"t": t, "s": s}, alerts={}, events={})
+def _trace(t: np.ndarray, s: np.ndarray) -> Scores:
+    return Scores(t, s)
 
 
 def test_window_max_takes_the_largest_s_in_the_window_and_skips_nan() -> None:
@@ -55,6 +55,10 @@ def test_window_max_takes_the_largest_s_in_the_window_and_skips_nan() -> None:
     scores, found = clip_scores(_trace(t, s), [5.0, 2.0])
     np.testing.assert_array_equal(scores, [3.0, 0.0])
     np.testing.assert_array_equal(found, [True, True])
+    # scores that describe other times than their frames' (the two-axle detector's
+    # hypothesised crossings) need not be in time order: the same maximum
+    order = np.random.default_rng(0).permutation(t.size)
+    assert window_max(t[order], s[order], 5.0) == (3.0, True)
 
 
 def test_a_window_without_any_s_scores_zero_and_says_no_lead() -> None:
@@ -249,8 +253,8 @@ def test_traces_are_cached_and_reused(tmp_path: Path, monkeypatch: pytest.Monkey
     assert set(traces) == {"uncompensated", "fused-kalman"}
     assert len(traces["fused-kalman"]) == job.n_frames
 
-    # another configuration of one method: only that trace (and the reference) is redone
-    changed = replace(
+    # another detector setting: the traces hold the detector's input, nothing is redone
+    detector_only = replace(
         methods,
         configs={
             **methods.configs,
@@ -258,10 +262,20 @@ def test_traces_are_cached_and_reused(tmp_path: Path, monkeypatch: pytest.Monkey
                 methods.configs["uncompensated"],
                 anomaly=replace(
                     methods.configs["uncompensated"].anomaly,
-                    detector=replace(
-                        methods.configs["uncompensated"].anomaly.detector, threshold_px=2.0
-                    ),
+                    std=replace(methods.configs["uncompensated"].anomaly.std, threshold_px=2.0),
                 ),
+            ),
+        },
+    )
+    assert process_recording(job, detector_only).methods_run == ()
+    # another trajectory setting of one method: only that trace (and the reference) is redone
+    changed = replace(
+        methods,
+        configs={
+            **methods.configs,
+            "uncompensated": replace(
+                methods.configs["uncompensated"],
+                heave=replace(methods.configs["uncompensated"].heave, cutoff_hz=0.3),
             ),
         },
     )

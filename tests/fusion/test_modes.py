@@ -24,21 +24,67 @@ def _trusted(cfg: ModeConfig | None = None) -> ModeSupervisor:
     return sup
 
 
-def test_one_bad_frame_is_bridged_two_lose_vision() -> None:
+def test_short_failures_are_bridged_a_lasting_one_loses_vision() -> None:
+    dt = 1 / 30
     sup = _trusted()
-    sup.bad_frame(1 / 30)
+    sup.bad_frame(dt)
     assert sup.update_mode(True) is FusionMode.FUSED
-    assert sup.good_frame(2 / 30, True)
-    sup.bad_frame(3 / 30)
-    sup.bad_frame(4 / 30)
+    assert sup.good_frame(2 * dt, True)
+    # every other frame failing (a rough road's wheel hop): still fused, the gyro bridges
+    t = 2 * dt
+    for _ in range(30):
+        t += dt
+        sup.bad_frame(t)
+        t += dt
+        assert sup.good_frame(t, True)
+        assert sup.update_mode(True) is FusionMode.FUSED
+    # failures for less than loss_time_s (0.3 s): bridged
+    last_good = t
+    for _ in range(8):  # 0.267 s
+        t += dt
+        sup.bad_frame(t)
+    assert sup.update_mode(True) is FusionMode.FUSED
+    # for loss_time_s: lost
+    while t - last_good < sup.cfg.loss_time_s - 1e-9:
+        t += dt
+        sup.bad_frame(t)
     assert sup.update_mode(True) is FusionMode.IMU_ONLY
     assert sup.update_mode(False) is FusionMode.DEGRADED
+
+
+def test_validation_survives_single_failures_not_a_long_gap() -> None:
+    dt = 1 / 30
+    sup = _trusted()
+    t = 0.0
+    while sup.trusted():
+        t += dt
+        sup.bad_frame(t)
+    t += dt
+    start = t
+    assert not sup.good_frame(t, True)
+    assert sup.trust is VisionTrust.VALIDATING
+    t += dt
+    sup.bad_frame(t)  # one failed frame: keeps validating
+    assert sup.trust is VisionTrust.VALIDATING
+    while not sup.good_frame(t + dt, True):
+        t += dt
+    t += dt
+    assert t - start == pytest.approx(0.3, abs=dt / 2)
+    # a gap longer than loss_time_s while validating: lost, validation starts over
+    while sup.trusted():
+        t += dt
+        sup.bad_frame(t)
+    t += dt
+    assert not sup.good_frame(t, True)
+    t += 0.4
+    sup.bad_frame(t)
+    assert sup.trust is VisionTrust.LOST
 
 
 def test_revalidation_needs_consistent_frames_for_the_whole_period() -> None:
     sup = _trusted()
     sup.bad_frame(0.1)
-    sup.bad_frame(0.13)
+    sup.bad_frame(0.3)
     dt = 1 / 30
     t = 1.0
     for _ in range(9):  # 0.267 s of good frames: not yet
@@ -104,7 +150,8 @@ def test_neither_source_is_degraded_and_the_std_grows(kit) -> None:  # type: ign
     assert deg.size > 0
     assert 8.5 + 0.2 <= r.t[deg[0]] <= 8.5 + 0.3
     assert np.all(np.diff(r.std[deg]) > 0)
-    assert np.all(r.mode[(r.t > 8.1) & (r.t < 8.6)] == IMU_ONLY)
+    # vision is lost loss_time_s (0.3 s) after its last good frame
+    assert np.all(r.mode[(r.t > 8.35) & (r.t < 8.6)] == IMU_ONLY)
 
 
 def test_vision_that_disagrees_with_the_gyro_is_not_trusted_again(kit) -> None:  # type: ignore[no-untyped-def]
@@ -142,8 +189,10 @@ def test_failures_pushed_explicitly_count_as_bad_frames(kit) -> None:  # type: i
     f = make_fusion("kalman")
     r = kit.replay(f, d, kit.front_end(d))
     i = np.searchsorted(r.t, 3.0)
-    assert r.mode[i] == FUSED  # the first failed frame is bridged
-    assert r.mode[i + 1] == IMU_ONLY
+    lost = i + int(np.argmax(r.mode[i:] == IMU_ONLY))
+    # the failed frames are bridged until loss_time_s after the last good frame
+    assert np.all(r.mode[i:lost] == FUSED)
+    assert r.t[lost] - r.t[i - 1] == pytest.approx(0.3, abs=1.01 / 30)
 
 
 def test_a_failed_fit_from_the_estimator_is_a_vision_failure() -> None:

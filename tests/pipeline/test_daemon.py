@@ -19,7 +19,14 @@ import pytest
 from roadpreview.canbus import read_can_log
 from roadpreview.canbus.live import open_bus
 from roadpreview.canbus.live import replay as replay_can
-from roadpreview.canbus.output import OutputDecoder, ReceivedAlert, ReceivedStatus
+from roadpreview.canbus.output import (
+    OutputDecoder,
+    ReceivedAlert,
+    ReceivedAlertDetail,
+    ReceivedOutput,
+    ReceivedRoadStatus,
+    ReceivedStatus,
+)
 from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline import PipelineConfig
 from roadpreview.pipeline.daemon import Daemon, DaemonOptions, DaemonSummary
@@ -82,11 +89,11 @@ class _Collector:
         self.reader = can.BufferedReader()
         self.notifier = can.Notifier(self.bus, [self.reader], timeout=0.05)
 
-    def close(self) -> list[ReceivedAlert | ReceivedStatus]:
+    def close(self) -> list[ReceivedOutput]:
         self.notifier.stop()
         self.bus.shutdown()
         decoder = OutputDecoder()
-        out: list[ReceivedAlert | ReceivedStatus] = []
+        out: list[ReceivedOutput] = []
         while (msg := self.reader.get_message(timeout=0.0)) is not None:
             decoded = decoder.decode(msg)
             if decoded is not None:
@@ -149,16 +156,26 @@ def test_daemon_on_virtual_bus_matches_the_replay(short_demo, tmp_path: Path) ->
     assert len(statuses) == pytest.approx(span / 0.1 + 1, rel=0.2)
     assert statuses[-1].mode == summary.mode_changes[-1][1]  # the pipeline's mode
     assert statuses[-1].alert_count == len(summary.alerts) % 16
+    # the road status goes with every status
+    roads = [m for m in received if isinstance(m, ReceivedRoadStatus)]
+    assert len(roads) == pytest.approx(len(statuses), abs=2)
 
-    # the alerts on the bus are the daemon's own, in order
+    # the alerts on the bus are the daemon's own, in order, each with its details
     got = [m for m in received if isinstance(m, ReceivedAlert)]
+    details = {m.alert_id: m for m in received if isinstance(m, ReceivedAlertDetail)}
     assert len(got) == len(summary.alerts)
+    assert len(details) == len(summary.alerts)
     for rx, sent in zip(got, summary.alerts, strict=True):
+        assert rx.alert_id == sent.alert_id % 256
         assert rx.side == sent.side
         assert rx.mode == sent.mode
-        assert rx.severity_px == pytest.approx(min(sent.severity_px, 51.0), abs=0.11)
+        detail = details[rx.alert_id]
+        assert detail.detector == _config(channel).anomaly.detector
+        assert detail.score == pytest.approx(min(sent.severity_px, 50.8), abs=0.11)
     # ... and the alerts log holds them too (written, flushed, closed)
-    assert len(list(read_can_log(tmp_path / "alerts.blf"))) == len(summary.alerts)
+    logged = [OutputDecoder().decode(m) for m in read_can_log(tmp_path / "alerts.blf")]
+    assert sum(isinstance(m, ReceivedAlert) for m in logged) == len(summary.alerts)
+    assert sum(isinstance(m, ReceivedAlertDetail) for m in logged) == len(summary.alerts)
 
     # the same alerts as the replay of the recording, frame k on both sides at start + k/fps
     ref = replay(ReplayInputs.from_recording(short_demo.folder))

@@ -12,7 +12,13 @@ import numpy as np
 import pytest
 
 from roadpreview.canbus import load_database, read_can_log
-from roadpreview.canbus.output import OutputDecoder, ReceivedAlert, ReceivedStatus
+from roadpreview.canbus.output import (
+    OutputDecoder,
+    ReceivedAlert,
+    ReceivedAlertDetail,
+    ReceivedRoadStatus,
+    ReceivedStatus,
+)
 from roadpreview.cli.main import main
 from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.fusion.mode import FusionMode
@@ -43,6 +49,15 @@ def test_replay_writes_every_output_and_they_are_consistent(short_demo, tmp_path
     alerts = [k for k in kinds if isinstance(k, ReceivedAlert)]
     assert len(statuses) == pytest.approx(8.0 / 0.1, abs=3)
     assert len(alerts) == len(result.alerts)
+    # each RP_ALERT is followed by its RP_ALERT_DETAIL; RP_ROAD_STATUS goes with RP_STATUS
+    for k, kind in enumerate(kinds):
+        if isinstance(kind, ReceivedAlert):
+            detail = kinds[k + 1]
+            assert isinstance(detail, ReceivedAlertDetail)
+            assert detail.alert_id == kind.alert_id
+    roads = [k for k in kinds if isinstance(k, ReceivedRoadStatus)]
+    assert [r.t_rx_s for r in roads] == [s.t_rx_s for s in statuses]
+    assert decoder.problems == {}
     assert load_database().get_message_by_name("RP_STATUS") is not None
 
 

@@ -32,13 +32,21 @@ class Alert:
 
     t_s: float  #: when the lead crossed the anomaly, s
     t_emit_s: float  #: when the detector confirmed it, s
-    distance_m: float | None  #: distance ahead of the ego at t_s (the lead's distance), m
-    time_to_arrival_s: float | None  #: distance / ego speed, from t_s, s
-    severity_px: float  #: peak of s(t), px
-    height_mm: float | None  #: estimated anomaly height (α f δ / d model), mm
+    distance_m: float | None  #: distance from the ego camera to the anomaly at t_s, m
+    time_to_arrival_s: float | None  #: until the ego's front axle is there, from t_s, s
+    severity_px: float  #: the detector's score (std: peak s in px; two-axle: background stds)
+    #: estimated anomaly height, mm: signed (bump +, pothole -) from the two-axle
+    #: detector's inverse model; the std detector's α f δ / d model gives a magnitude
+    height_mm: float | None
     side: Side  #: left / right / both / unknown
-    confidence: float  #: 0..1, heuristic (docs/detector.md), not a calibrated probability
+    #: probability that the anomaly is real (two-axle: calibrated on the evaluation's
+    #: training folds); the std detector's is a heuristic (docs/detector.md)
+    confidence: float
     mode: FusionMode  #: fusion mode at the crossing
+    alert_id: int = 0  #: sequence number of the alert since start (CAN: modulo 256)
+    height_std_mm: float | None = None  #: std of ``height_mm`` (None: unknown)
+    length_m: float | None = None  #: estimated length along the road (None: not resolved)
+    lead_speed_mps: float | None = None  #: the lead's speed when it crossed, m/s
 
     @property
     def arrival_t_s(self) -> float | None:
@@ -61,6 +69,7 @@ class AlertBuilder:
         check_ranges(self.config, "AlertConfig")
         self.config.validate()
         self.signal = signal or SignalModel()
+        self.alerts_built = 0  #: alerts built so far (the last one's id)
 
     def confidence(self, event: AnomalyEvent) -> float:
         """Heuristic confidence in [0, 1] (docs/detector.md).
@@ -80,7 +89,8 @@ class AlertBuilder:
         if event.suppressed:
             return None
         d = event.lead_distance_m
-        distance = d if math.isfinite(d) and d > 0 else None
+        ahead = event.anomaly_distance_m if math.isfinite(event.anomaly_distance_m) else d
+        distance = ahead if math.isfinite(ahead) and ahead > 0 else None
         speed = event.ego_speed_mps
         tta = None
         if (
@@ -88,18 +98,29 @@ class AlertBuilder:
             and speed is not None
             and speed >= max(self.config.min_speed_mps, 1e-9)
         ):
-            tta = distance / speed
-        height = self.signal.height_m(event.s_px, d)
+            tta = max(distance - self.config.camera_to_front_axle_m, 0.0) / speed
+        if math.isfinite(event.height_m):
+            height: float | None = event.height_m
+        else:
+            height = self.signal.height_m(event.s_px, d)
+        confidence = event.confidence
+        if not math.isfinite(confidence):
+            confidence = self.confidence(event)
+        self.alerts_built += 1
         return Alert(
             t_s=event.t_s,
             t_emit_s=event.t_emit_s,
             distance_m=distance,
             time_to_arrival_s=tta,
-            severity_px=event.s_px,
+            severity_px=event.score if math.isfinite(event.score) else event.s_px,
             height_mm=None if height is None else 1000.0 * height,
             side=event.side,
-            confidence=self.confidence(event),
+            confidence=float(min(1.0, max(0.0, confidence))),
             mode=event.mode,
+            alert_id=self.alerts_built,
+            height_std_mm=_mm(event.height_std_m),
+            length_m=event.length_m if math.isfinite(event.length_m) else None,
+            lead_speed_mps=event.lead_speed_mps if math.isfinite(event.lead_speed_mps) else None,
         )
 
     def build_all(self, events: Iterable[AnomalyEvent]) -> list[Alert]:
@@ -110,3 +131,7 @@ class AlertBuilder:
             if a is not None:
                 alerts.append(a)
         return alerts
+
+
+def _mm(x: float) -> float | None:
+    return 1000.0 * x if math.isfinite(x) else None

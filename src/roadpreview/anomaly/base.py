@@ -70,24 +70,44 @@ class TrajectorySample:
     #: the correction subtracted from y to get y_c (f tan φ + the heave term), px; NaN if
     #: unknown. Its windowed spread says how hard the compensation is working
     compensation_px: float = math.nan
+    #: camera focal length (vertical), px: turns pixels at the lead's distance into metres.
+    #: NaN: unknown (the detector then works in pixels and gives no height)
+    focal_px: float = math.nan
+    #: the ego's vertical specific force over the frame interval, band-passed (gravity and
+    #: slow tilt removed), m/s²: RMS and largest magnitude of the IMU samples since the
+    #: previous frame; NaN without an accelerometer (`roadpreview.ego`)
+    ego_accel_rms_mps2: float = math.nan
+    ego_accel_peak_mps2: float = math.nan
 
 
 @dataclass(frozen=True, slots=True)
 class DetectorFrame:
-    """The detector's output for one frame; s values are NaN while undefined."""
+    """The detector's output for one frame; values are NaN while undefined.
+
+    ``score`` is the detector's own statistic against its ``threshold`` (the windowed
+    std: s in px; the two-axle detector: the fitted road input in units of its running
+    background); ``t_score`` is the time the score describes (the windowed std: this
+    frame; the two-axle detector: the front axle's crossing it hypothesises). The s
+    columns are the paper's eq. 1 (NaN for detectors that do not compute it).
+    """
 
     t: float  #: frame time, s
     s: float  #: paper eq. 1 on the whole lead, px
     s_left: float  #: eq. 1 on the left half, px
     s_right: float  #: eq. 1 on the right half, px
-    threshold_px: float  #: threshold in force at this frame, px
+    threshold_px: float  #: threshold in force at this frame, px (NaN: not a pixel threshold)
     n_samples: int  #: valid samples of the whole-lead trajectory in the window
     suppressed: SuppressionReason  #: why alerts are held back (falsy: they are not)
+    score: float = math.nan  #: the detector's statistic (see the class docstring)
+    threshold: float = math.nan  #: the threshold on ``score`` in force at this frame
+    t_score: float = math.nan  #: the time ``score`` describes, s
+    height_m: float = math.nan  #: road input the best fit stands for, m (bump +, pothole -)
+    background_m: float = math.nan  #: running background of that estimate (1 std), m
 
     @property
     def above(self) -> bool:
-        """True when s exceeds the threshold (whether or not suppressed)."""
-        return self.s > self.threshold_px
+        """True when the score exceeds the threshold (whether or not suppressed)."""
+        return self.score > self.threshold
 
 
 @dataclass(frozen=True, slots=True)
@@ -118,6 +138,19 @@ class AnomalyEvent:
     mode: FusionMode  #: fusion mode at the crossing
     valid_fraction: float  #: share of the peak window's frames with a valid position
     suppressed: SuppressionReason  #: why this peak must not become an alert (falsy: it may)
+    score: float = math.nan  #: the detector's statistic at the event (std: s_px)
+    threshold: float = math.nan  #: the threshold on ``score`` at the event
+    #: estimated road input: height of the anomaly (bump +, pothole -), m, and its std;
+    #: NaN when the detector gives none (no focal length or distance)
+    height_m: float = math.nan
+    height_std_m: float = math.nan
+    length_m: float = math.nan  #: estimated length along the road, m (NaN: not resolved)
+    lead_speed_mps: float = math.nan  #: the lead's speed over ground at the crossing, m/s
+    #: distance from the ego camera to the anomaly at ``t_s``, m (NaN: take the lead's)
+    anomaly_distance_m: float = math.nan
+    #: probability that the event is a real anomaly (calibrated; NaN: the detector has no
+    #: calibration, the alert's heuristic applies)
+    confidence: float = math.nan
 
 
 class Detector(Protocol):
@@ -129,6 +162,10 @@ class Detector(Protocol):
 
     def flush(self) -> list[AnomalyEvent]:
         """End of stream: confirm and return pending peaks."""
+        ...
+
+    def restart(self) -> list[AnomalyEvent]:
+        """A new target: the pending events, then a window without the old one's frames."""
         ...
 
     @property

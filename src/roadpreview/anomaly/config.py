@@ -11,8 +11,18 @@ from dataclasses import dataclass, field
 
 from scipy.stats import chi2
 
+from roadpreview.anomaly.confirm import ConfirmConfig
+from roadpreview.anomaly.response import NominalVehicle
+from roadpreview.anomaly.roughness import RoughnessConfig
 from roadpreview.configtools import param
 from roadpreview.errors import ConfigError
+
+#: detector name -> (module, class, the `AnomalyConfig` field holding its table); the
+#: registry of `roadpreview.anomaly.make_detector`
+DETECTORS: dict[str, tuple[str, str, str]] = {
+    "two-axle": ("roadpreview.anomaly.two_axle", "TwoAxleDetector", "two_axle"),
+    "std": ("roadpreview.anomaly.windowed_std", "WindowedStdDetector", "std"),
+}
 
 #: assumed noise of the compensated trajectory y_c, px (docs/detector.md, "Threshold")
 NOISE_STD_PX = 0.4
@@ -229,6 +239,284 @@ class DetectorConfig:
 
 
 @dataclass(frozen=True)
+class TwoAxleConfig:
+    """The two-axle CFAR detector (`roadpreview.anomaly.two_axle`, ``docs/detector.md``).
+
+    Thresholds are physical: a margin over the road's own background (a ratio) and a
+    floor in millimetres of road input, so one configuration serves every camera.
+    """
+
+    vehicle: NominalVehicle = field(default_factory=NominalVehicle)
+    durations_s: tuple[float, ...] = param(
+        (0.03, 0.07, 0.14, 0.25, 0.45, 0.8),
+        unit="s",
+        help="bank of anomaly durations under a wheel (length / speed): a 0.3 m pothole at"
+        " 36 km/h is 0.03 s, a 3 m cushion at 20 km/h 0.55 s",
+    )
+    pre_s: float = param(
+        0.4, unit="s", gt=0, le=3, help="fit window before the front axle meets the anomaly"
+    )
+    post_s: float = param(
+        0.3,
+        unit="s",
+        ge=0.1,
+        le=3,
+        help="fit window after the rear axle leaves it: a 1.3 Hz body peaks ~0.2 s after its"
+        " input; longer only delays the alert",
+    )
+    threshold_z: float = param(
+        6.0,
+        unit="background std",
+        gt=0,
+        le=100,
+        help="CFAR margin: the fitted road input must exceed this many background stds of"
+        " the current road. The lowest of the evaluation's grid that keeps the wild set"
+        " (its 22 drives: the training data) at <= 0.5 false alarms per minute: 0.36"
+        " (docs/evaluation.md, E6); the generalization suite is held out",
+    )
+    min_height_mm: float = param(
+        20.0,
+        unit="mm",
+        ge=0,
+        le=500,
+        help="floor: smaller road inputs give no alert whatever the background (a 2 cm"
+        " joint is what a comfort-tuned damper does not need to know about)",
+    )
+    tracking_noise_px: float = param(
+        0.15,
+        unit="px",
+        gt=0,
+        le=10,
+        help="std of the lead's image row from tracking alone (LK grid on a car's rear):"
+        " carried to the road through each fit at the current distance, the background's"
+        " floor (a glass-smooth road must not turn tracking noise into alerts)",
+    )
+    background_s: float = param(
+        30.0,
+        unit="s",
+        gt=1,
+        le=600,
+        help="the background follows the road over this much driving (tens of seconds: a"
+        " road's class changes over hundreds of metres)",
+    )
+    background_short_s: float = param(
+        5.0,
+        unit="s",
+        gt=0.5,
+        le=600,
+        help="the background is at least the median over this much: it rises within seconds"
+        " when the road or the tracking gets worse (a texture loss, a rough stretch)",
+    )
+    background_min_s: float = param(
+        5.0,
+        unit="s",
+        ge=0,
+        le=600,
+        help="the road is being learnt until this much of its background has been seen (the"
+        " start of a drive): the score relies on the whitening model alone, with a wider"
+        " margin (learning_threshold_factor)",
+    )
+    learning_threshold_factor: float = param(
+        1.5,
+        unit="",
+        ge=1,
+        le=10,
+        help="while the road is being learnt (the first background_min_s), the whitening"
+        " model stands for the background and the threshold is this many times higher",
+    )
+    background_refresh_frames: int = param(
+        30,
+        ge=1,
+        le=1000,
+        help="the background median is recomputed every this many frames (once a second at"
+        " 30 fps: it describes tens of seconds of road)",
+    )
+    guard_s: float = param(
+        3.0,
+        unit="s",
+        ge=0,
+        le=30,
+        help="frames this close after an eligible one are not background (neither its level"
+        " nor its whitening filter): an anomaly's response, two axles and the body's"
+        " ringing, lasts 2-3 s and must not raise its own background or bend the filter",
+    )
+    compensation_error_fraction: float = param(
+        0.1,
+        unit="",
+        ge=0,
+        le=1,
+        help="the ego-motion compensation is good to about this fraction of itself; its"
+        " fit on the same template widens the heave channel's background (as for the"
+        " windowed std)",
+    )
+    glitch_sigma: float = param(
+        8.0,
+        unit="background std",
+        gt=1,
+        le=1000,
+        help="a frame-to-frame change of the lead's row beyond this many robust stds of the"
+        " background's changes ...",
+    )
+    glitch_ratio: float = param(
+        4.0,
+        unit="",
+        gt=1,
+        le=1000,
+        help="... and this many times the largest change of the two frames either side is a"
+        " jump of the tracker (a re-seeded grid, a box that snaps), not the lead's body (it"
+        " moves smoothly): it is taken out of the later samples. On the 60 fps"
+        " generalization drive such jumps were three false alarms a minute",
+    )
+    jolt_ratio: float = param(
+        4.0,
+        unit="",
+        gt=1,
+        le=100,
+        help="the ego is jolted (its own anomaly) when its band-passed vertical acceleration"
+        " peaks at this many times its background (`roadpreview.ego`) ...",
+    )
+    jolt_min_mps2: float = param(
+        1.5, unit="m/s^2", ge=0, le=50, help="... and at least this much"
+    )
+    jolt_mask_s: tuple[float, float] = param(
+        (0.1, 0.25),
+        unit="s",
+        help="the lead's channels are interpolated over this long before / after each frame"
+        " where the ego itself was jolted: the compensation misses part of a jolt's sharp"
+        " motion (a few ms of IMU-camera timing, the heave's high-pass) and does not"
+        " compensate the ego's roll (demo drive: a 1 px notch in y_c where the ego crossed"
+        " the pothole the lead had crossed)",
+    )
+    roll_leak_fraction: float = param(
+        0.3,
+        unit="",
+        ge=0,
+        le=1,
+        help="the halves of a lead bouncing on both wheels never move quite alike (their"
+        " points, outliers and box edges differ): on the demo drive's cushion the roll"
+        " channel moved a quarter of the heave. This share of the heave amplitude widens"
+        " the roll channel's background",
+    )
+    one_sided_ratio: float = param(
+        1.0,
+        unit="",
+        gt=0,
+        le=10,
+        help="side LEFT / RIGHT when the roll channel's amplitude exceeds this times the"
+        " heave channel's: one side of height h gives h and h / 2, both sides h and 0",
+    )
+    refine_search_s: float = param(
+        0.45,
+        unit="s",
+        ge=0,
+        le=2,
+        help="a confirmed event's crossing is searched this far around its peak's, with every"
+        " duration, on one common window: the matched filter's side lobes (half a body"
+        " period, 0.38 s, off and of the opposite sign) are not taken for the anomaly",
+    )
+    close_fit_fraction: float = param(
+        0.8,
+        unit="",
+        gt=0,
+        le=1,
+        help="durations whose score is within this fraction of the best spread the height's"
+        " std",
+    )
+    confidence_logit: tuple[float, float] = param(
+        (-0.75, 6.84),
+        help="(a, b): an event's probability of being real is 1 / (1 + exp(-(a + b ln(z /"
+        " threshold_z)))), z its score. Logistic fit to the alerts of the 22 wild drives"
+        " (35 alerts, 27 real; docs/evaluation.md, E6 'Confidence': its cross-fitted and"
+        " held-out reliability)",
+    )
+    refractory_s: tuple[float, float] = param(
+        (0.5, 2.0),
+        unit="s",
+        help="hypotheses whose crossing lies this much before / after a reported anomaly's"
+        " are its ringing (the body's oscillation after the rear axle), not a new anomaly",
+    )
+    peak_window_s: float = param(
+        0.45,
+        unit="s",
+        gt=0,
+        le=5,
+        help="an event is sent this long after its first frame above the threshold,"
+        " described by its best frame in between (a fixed latency); its crossing is then"
+        " searched ± refine_search_s on the frames seen since",
+    )
+    min_lead_speed_mps: float = param(
+        2.0,
+        unit="m/s",
+        gt=0,
+        le=50,
+        help="a lead slower than this crosses nothing worth a two-axle fit (standstill,"
+        " creeping): no score",
+    )
+    range_rate_s: float = param(
+        1.0, unit="s", gt=0, le=10, help="the range rate is the distance's slope over this time"
+    )
+    max_range_rate_mps: float = param(
+        15.0, unit="m/s", gt=0, le=100, help="range rates beyond this are distance glitches"
+    )
+    min_distance_m: float = param(
+        5.0,
+        unit="m",
+        gt=0,
+        le=100,
+        help="no fit while the lead's distance is below this: at the simulated wild drives'"
+        " gaps (5-35 m) a lead this near is the tracker holding the road or a box that grew",
+    )
+    max_distance_ratio: float = param(
+        1.5,
+        unit="",
+        gt=1,
+        le=100,
+        help="no fit over a window whose lead distance varies more than this factor: the"
+        " tracker switched or lost its target (a real gap changes a few per cent a second)",
+    )
+    max_gap_s: float = param(
+        0.15,
+        unit="s",
+        gt=0,
+        le=2,
+        help="dropped frames and invalid stretches up to this long are interpolated within a"
+        " fit window (a few frames: the body moves at 1-2 Hz); a longer gap: no fit there",
+    )
+    min_frames: int = param(8, ge=3, le=10_000, help="fewer valid frames in a window: no fit")
+    min_valid_fraction: float = param(
+        0.5, unit="", gt=0, le=1, help="share of a window's frames that must be valid"
+    )
+    min_span_fraction: float = param(
+        0.8, unit="", gt=0, le=1, help="the frames must span this share of the window"
+    )
+    buffer_frames: int = param(
+        512, ge=32, le=100_000, help="frames kept: the longest window at the highest frame rate"
+    )
+    lead_accel_limit_mps2: float = param(
+        2.0, unit="m/s^2", gt=0, le=20, help="suppression: as the windowed-std detector's"
+    )
+    imu_only_settle_s: float = param(
+        10.0, unit="s", ge=0, le=600, help="suppression: as the windowed-std detector's"
+    )
+    suppress_hold_s: float = param(
+        0.5, unit="s", ge=0, le=10, help="suppression: as the windowed-std detector's"
+    )
+
+    @property
+    def max_window_s(self) -> float:
+        """The longest fit window (slowest lead, longest duration), s."""
+        tau = self.vehicle.wheelbase_m / self.min_lead_speed_mps
+        return self.pre_s + tau + max(self.durations_s) + self.post_s
+
+    def validate(self, where: str = "TwoAxleConfig") -> None:
+        """Cross-field checks."""
+        if not self.durations_s or any(not 0 < d <= 3.0 for d in self.durations_s):
+            raise ConfigError(f"{where}.durations_s = {self.durations_s}: each in (0, 3] s")
+        if list(self.durations_s) != sorted(self.durations_s):
+            raise ConfigError(f"{where}.durations_s = {self.durations_s}: must increase")
+
+
+@dataclass(frozen=True)
 class AlertConfig:
     """How events become alerts (``AlertBuilder``)."""
 
@@ -238,6 +526,14 @@ class AlertConfig:
         ge=0,
         le=100,
         help="below this ego speed there is no time to arrival (standstill)",
+    )
+    camera_to_front_axle_m: float = param(
+        0.2,
+        unit="m",
+        ge=-5.0,
+        le=10.0,
+        help="the ego's front axle is this far ahead of the camera: the time to arrival is"
+        " counted to the front axle (the simulator's car: 0.2 m); measure it on the car",
     )
     mode_confidence: tuple[float, float, float, float] = param(
         (1.0, 0.8, 0.6, 0.0),
@@ -254,7 +550,23 @@ class AlertConfig:
 
 @dataclass(frozen=True)
 class AnomalyConfig:
-    """The ``[anomaly]`` table: detector, alerts and the shared signal model."""
+    """The ``[anomaly]`` table: which detector, each detector's table, the alerts."""
 
-    detector: DetectorConfig = field(default_factory=DetectorConfig)
+    detector: str = param(
+        "two-axle",
+        choices=tuple(DETECTORS),
+        help="two-axle: the product's matched filter against the road's background"
+        " (docs/detector.md); std: the paper's windowed standard deviation (eq. 1), the"
+        " baseline",
+    )
+    std: DetectorConfig = field(default_factory=DetectorConfig)
+    two_axle: TwoAxleConfig = field(default_factory=TwoAxleConfig)
     alert: AlertConfig = field(default_factory=AlertConfig)
+    roughness: RoughnessConfig = field(default_factory=RoughnessConfig)
+    confirm: ConfirmConfig = field(default_factory=ConfirmConfig)
+
+    @property
+    def detector_config(self) -> DetectorConfig | TwoAxleConfig:
+        """The table of the chosen detector."""
+        table: DetectorConfig | TwoAxleConfig = getattr(self, DETECTORS[self.detector][2])
+        return table

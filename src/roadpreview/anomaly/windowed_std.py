@@ -34,6 +34,7 @@ from roadpreview.anomaly.base import (
 from roadpreview.anomaly.config import DetectorConfig
 from roadpreview.anomaly.nms import OnsetPicker, PeakPicker
 from roadpreview.anomaly.running import WindowedMoments
+from roadpreview.anomaly.suppression import SuppressionTracker
 from roadpreview.configtools import check_ranges
 from roadpreview.errors import InputDataError
 from roadpreview.fusion.mode import FusionMode
@@ -86,13 +87,14 @@ class WindowedStdDetector:
         self._moments = self._new_moments()
         self._nms = self._picker()
         self._nms_suppressed = self._picker()
-        self._last_cause_t = {
-            SuppressionReason.LEAD_ACCEL: -math.inf,
-            SuppressionReason.DEGRADED: -math.inf,
-            SuppressionReason.SETTLING: -math.inf,
-        }
-        self._fused_s = 0.0  # time the fusion has been FUSED so far (kept over restarts)
-        self._fused_t = math.nan  # time of the last FUSED sample
+        cfg = self.config
+        self._suppression = SuppressionTracker(
+            lead_accel_limit_mps2=cfg.lead_accel_limit_mps2,
+            settle_s=cfg.imu_only_settle_s,
+            span_s=cfg.window_s + cfg.suppress_hold_s,
+        )
+        # a FUSED stretch counts as a frame interval, or at most one window across a gap
+        self._suppression.max_step_s = cfg.window_s
         self._frame: DetectorFrame | None = None
         self._t_last = -math.inf
 
@@ -134,30 +136,6 @@ class WindowedStdDetector:
         if cfg.compensation_error_fraction > 0 and math.isfinite(s_comp_px):
             thr = math.hypot(thr, cfg.compensation_error_fraction * s_comp_px)
         return thr
-
-    def _suppression(self, t: float, sample: TrajectorySample) -> SuppressionReason:
-        cfg = self.config
-        accel = sample.lead_accel_mps2
-        if accel is not None and math.isfinite(accel) and abs(accel) > cfg.lead_accel_limit_mps2:
-            self._last_cause_t[SuppressionReason.LEAD_ACCEL] = t
-        if sample.mode == FusionMode.DEGRADED:
-            self._last_cause_t[SuppressionReason.DEGRADED] = t
-        if sample.mode == FusionMode.FUSED:
-            if math.isfinite(self._fused_t):
-                # a frame interval, or at most one window across a gap
-                self._fused_s += min(t - self._fused_t, cfg.window_s)
-            self._fused_t = t
-        else:
-            self._fused_t = math.nan
-            if sample.mode == FusionMode.IMU_ONLY and self._fused_s < cfg.imu_only_settle_s:
-                self._last_cause_t[SuppressionReason.SETTLING] = t
-        # a cause taints every window that still holds its samples, plus the settling time
-        span = cfg.window_s + cfg.suppress_hold_s
-        reason = SuppressionReason.NONE
-        for cause, t_cause in self._last_cause_t.items():
-            if t - t_cause < span:
-                reason |= cause
-        return reason
 
     def _s_values(self, t: float) -> tuple[list[float], int]:
         """s of the four channels (NaN where undefined) and the whole-lead sample count."""
@@ -204,6 +182,8 @@ class WindowedStdDetector:
             mode=FusionMode(int(aux[i, _AUX_MODE])),
             valid_fraction=float(np.count_nonzero(np.isfinite(y)) / len(y)),
             suppressed=suppressed,
+            score=s[0],
+            threshold=threshold,
         )
 
     def push(self, sample: TrajectorySample) -> list[AnomalyEvent]:
@@ -232,7 +212,7 @@ class WindowedStdDetector:
         self._moments.push(t, x, aux)
         s, n = self._s_values(t)
         threshold = self.threshold_px(sample.lead_distance_m, s[3])
-        suppressed = self._suppression(t, sample)
+        suppressed = self._suppression.push(sample)
         self._frame = DetectorFrame(
             t=t,
             s=s[0],
@@ -241,6 +221,9 @@ class WindowedStdDetector:
             threshold_px=threshold,
             n_samples=n,
             suppressed=suppressed,
+            score=s[0],
+            threshold=threshold,
+            t_score=t,
         )
         value = s[0] if s[0] > threshold else -math.inf
         main, other = (-math.inf, value) if suppressed else (value, -math.inf)

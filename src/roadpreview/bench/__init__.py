@@ -14,6 +14,7 @@ BENCHMARKS: dict[str, str] = {
     "sim": "roadpreview.bench.sim",
     "vision": "roadpreview.bench.vision",
     "fusion": "roadpreview.bench.fusion",
+    "detector": "roadpreview.bench.detector",
     "pipeline": "roadpreview.bench.pipeline",
 }
 

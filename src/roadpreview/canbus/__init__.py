@@ -1,9 +1,10 @@
 """CAN: the project's DBC and E2E protection, input decoding for any car, outputs, logs, live bus.
 
-* `dbc`: ``roadpreview.dbc`` (inputs, ``RP_ALERT``, ``RP_STATUS``), AUTOSAR E2E P01.
+* `dbc`: ``roadpreview.dbc`` (inputs; outputs ``RP_ALERT``, ``RP_STATUS``,
+  ``RP_ROAD_STATUS``, ``RP_ALERT_DETAIL``, ``RP_CONFIRM``), AUTOSAR E2E P01.
 * `mapping` + `decode`: any car's DBC + a mapping file -> `ImuSample` / `SpeedSample`.
 * `imu_csv`: phone-style IMU CSV files.
-* `output`: `Alert` / `Status` -> E2E-protected frames, and back.
+* `output`: `Alert` / `ConfirmationResult` / `Status` -> E2E-protected frames, and back.
 * `logio`: CAN log files in every format python-can reads (BLF, ASC, candump, TRC, CSV, .gz).
 * `live`: python-can buses, a bounded-queue listener, periodic status.
 """
@@ -14,6 +15,9 @@ from roadpreview.canbus.dbc import (
     IMU_RATES,
     RESERVED_OUTPUT_IDS,
     RP_ALERT,
+    RP_ALERT_DETAIL,
+    RP_CONFIRM,
+    RP_ROAD_STATUS,
     RP_STATUS,
     VEHICLE_SPEED,
     WHEEL_SPEEDS,
@@ -40,17 +44,27 @@ from roadpreview.canbus.mapping import (
     load_mapping,
 )
 from roadpreview.canbus.output import (
+    DETECTOR_CODES,
+    AlertDetailEncoder,
     AlertEncoder,
+    ConfirmEncoder,
     OutputDecoder,
     ReceivedAlert,
+    ReceivedAlertDetail,
+    ReceivedConfirm,
+    ReceivedOutput,
+    ReceivedRoadStatus,
     ReceivedStatus,
+    RoadStatusEncoder,
     Status,
     StatusEncoder,
     alert_frames,
+    detector_code,
 )
 from roadpreview.canbus.samples import ImuSample, InputSample, SpeedSample
 
 __all__ = [
+    "DETECTOR_CODES",
     "E2E_COUNTER_MODULUS",
     "IMU_ACCEL",
     "IMU_CSV_COLUMNS",
@@ -58,15 +72,20 @@ __all__ = [
     "QUANTITIES",
     "RESERVED_OUTPUT_IDS",
     "RP_ALERT",
+    "RP_ALERT_DETAIL",
+    "RP_CONFIRM",
+    "RP_ROAD_STATUS",
     "RP_STATUS",
     "VEHICLE_SPEED",
     "WHEEL_SPEEDS",
+    "AlertDetailEncoder",
     "AlertEncoder",
     "BoundedQueueListener",
     "CanInputDecoder",
     "CanLogReader",
     "CanOutput",
     "CanReceiver",
+    "ConfirmEncoder",
     "DecodeStats",
     "FrameProblem",
     "ImuSample",
@@ -75,7 +94,12 @@ __all__ = [
     "LogProblem",
     "OutputDecoder",
     "ReceivedAlert",
+    "ReceivedAlertDetail",
+    "ReceivedConfirm",
+    "ReceivedOutput",
+    "ReceivedRoadStatus",
     "ReceivedStatus",
+    "RoadStatusEncoder",
     "SpeedSample",
     "Status",
     "StatusEncoder",
@@ -84,6 +108,7 @@ __all__ = [
     "bind_mapping",
     "check_protected",
     "decode_log",
+    "detector_code",
     "e2e_layout",
     "encode_protected",
     "imu_samples",

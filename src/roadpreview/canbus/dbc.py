@@ -5,9 +5,10 @@ repository's ``data/roadpreview.dbc`` is a symlink to it) and is loaded with
 cantools in strict mode. Every input message carries an AUTOSAR E2E profile 1
 header: byte 0 is a CRC-8 SAE J1850 over the message's E2E data ID (DBC
 attribute ``E2E_DataID``) and bytes 1..7, bits 8..11 an alive counter that
-runs 0..14; so do the outputs ``RP_ALERT`` and ``RP_STATUS``
-(`roadpreview.canbus.output`). The CRC comes from the ``autosar-e2e``
-package. Messages and signals are documented in ``docs/can-interface.md``.
+runs 0..14; so do the outputs ``RP_ALERT``, ``RP_ALERT_DETAIL``, ``RP_CONFIRM``,
+``RP_STATUS`` and ``RP_ROAD_STATUS`` (`roadpreview.canbus.output`). The CRC comes
+from the ``autosar-e2e`` package. Messages and signals are documented in
+``docs/can-interface.md``.
 
 Other cars' DBCs (opendbc) load with ``load_database(path, strict=False)``:
 they often have overlapping or placeholder signals that strict mode refuses.
@@ -39,8 +40,12 @@ VEHICLE_SPEED = "VEHICLE_SPEED"
 WHEEL_SPEEDS = "WHEEL_SPEEDS"
 RP_ALERT = "RP_ALERT"
 RP_STATUS = "RP_STATUS"
+RP_ROAD_STATUS = "RP_ROAD_STATUS"
+RP_ALERT_DETAIL = "RP_ALERT_DETAIL"
+RP_CONFIRM = "RP_CONFIRM"
 
-#: 11-bit identifiers reserved for roadpreview's own output messages (alert, status)
+#: 11-bit identifiers reserved for roadpreview's own output messages (alerts, confirmations,
+#: status)
 RESERVED_OUTPUT_IDS = range(0x200, 0x210)
 
 #: DBC message attribute holding the AUTOSAR E2E data ID

@@ -7,10 +7,12 @@
   the queue was full. Decoding happens in the consumer, never in python-can's
   ``Notifier`` thread.
 * `CanReceiver` wires a ``can.Notifier`` to such a listener.
-* `CanOutput` sends ``RP_ALERT`` frames when asked and ``RP_STATUS`` every
-  100 ms with ``bus.send_periodic``; each periodic frame is re-encoded from
-  the latest `Status` with the next alive counter and CRC (python-can's
-  ``modifier_callback``), so the status stays E2E-valid between updates.
+* `CanOutput` sends ``RP_ALERT`` + ``RP_ALERT_DETAIL`` per alert and
+  ``RP_CONFIRM`` per checked alert when asked, and ``RP_STATUS`` +
+  ``RP_ROAD_STATUS`` every 100 ms with ``bus.send_periodic``; each periodic
+  frame is re-encoded from the latest `Status` with the next alive counter
+  and CRC (python-can's ``modifier_callback``), so the status stays
+  E2E-valid between updates.
 * `replay` plays a recorded log onto a bus at its recorded pace
   (``can.MessageSync``), for bench tests of a receiver.
 
@@ -24,7 +26,7 @@ from __future__ import annotations
 import logging
 import queue
 import threading
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from types import TracebackType
 from typing import Any
 
@@ -32,14 +34,23 @@ import can
 from cantools.database.can import Database
 
 from roadpreview.anomaly.alert import Alert
-from roadpreview.canbus.output import AlertEncoder, Status, StatusEncoder
+from roadpreview.anomaly.confirm import ConfirmationResult
+from roadpreview.canbus.output import (
+    AlertDetailEncoder,
+    AlertEncoder,
+    ConfirmEncoder,
+    RoadStatusEncoder,
+    Status,
+    StatusEncoder,
+    detector_code,
+)
 from roadpreview.errors import ConfigError, MissingDependencyError, OperationError
 
 log = logging.getLogger(__name__)
 
 #: default receive queue length: 10 s of a busy 500 kbit/s bus (~4000 frames/s) is 40000
 DEFAULT_QUEUE_SIZE = 10_000
-#: RP_STATUS period (the DBC's GenMsgCycleTime), s
+#: RP_STATUS and RP_ROAD_STATUS period (the DBC's GenMsgCycleTime), s
 STATUS_PERIOD_S = 0.1
 
 
@@ -173,12 +184,15 @@ def replay(
 
 
 class CanOutput:
-    """Send ``RP_ALERT`` and ``RP_STATUS`` on a bus (module docstring).
+    """Send roadpreview's outputs on a bus (module docstring).
 
-    ``send_alert`` and ``send_status`` send one frame now. ``start_status``
-    starts the periodic status; ``update_status`` changes what the next
-    periodic frames carry. ``sent`` keeps every frame sent by this object
-    when ``keep_sent`` is true (for logging them afterwards).
+    ``send_alert`` sends an alert's ``RP_ALERT`` and ``RP_ALERT_DETAIL`` frames
+    now, ``send_confirmation`` one ``RP_CONFIRM``, ``send_status`` /
+    ``send_road_status`` one ``RP_STATUS`` / ``RP_ROAD_STATUS``. ``start_status``
+    starts both periodic status messages; ``update_status`` changes what their
+    next frames carry. ``detector`` (``anomaly.detector``) goes into
+    ``RP_ALERT_DETAIL``. ``sent`` keeps every frame sent by this object when
+    ``keep_sent`` is true (for logging them afterwards).
     """
 
     def __init__(
@@ -187,15 +201,21 @@ class CanOutput:
         db: Database | None = None,
         *,
         keep_sent: bool = False,
+        detector: str = "two-axle",
     ) -> None:
         self.bus = bus
         self.alerts = AlertEncoder(db)
-        self.status = StatusEncoder(db)
+        self.details = AlertDetailEncoder(self.alerts.db)
+        self.confirms = ConfirmEncoder(self.alerts.db)
+        self.status = StatusEncoder(self.alerts.db)
+        self.road_status = RoadStatusEncoder(self.alerts.db)
+        detector_code(detector)  # an unknown name fails here, not at the first alert
+        self.detector = detector
         self.keep_sent = keep_sent
         self.sent: list[can.Message] = []
         self.alerts_sent = 0
         self._latest: Status | None = None
-        self._task: can.broadcastmanager.CyclicSendTaskABC | None = None
+        self._tasks: list[can.broadcastmanager.CyclicSendTaskABC] = []
         self._lock = threading.Lock()
 
     def _send(self, msg: can.Message) -> can.Message:
@@ -207,11 +227,27 @@ class CanOutput:
             self.sent.append(msg)
         return msg
 
-    def send_alert(self, alert: Alert, *, timestamp: float | None = None) -> can.Message:
-        """Encode and send one ``RP_ALERT`` frame."""
+    def send_alert(self, alert: Alert, *, timestamp: float | None = None) -> list[can.Message]:
+        """Encode and send one alert: its ``RP_ALERT`` frame, then its ``RP_ALERT_DETAIL``."""
         with self._lock:
-            msg = self.alerts.encode(alert, timestamp=timestamp)
+            frames = [
+                self.alerts.encode(alert, timestamp=timestamp),
+                self.details.encode(alert, self.detector, timestamp=timestamp),
+            ]
             self.alerts_sent += 1
+        return [self._send(m) for m in frames]
+
+    def send_confirmation(
+        self,
+        result: ConfirmationResult,
+        precision: float | None = None,
+        *,
+        timestamp: float | None = None,
+    ) -> can.Message:
+        """Encode and send one ``RP_CONFIRM`` frame (``precision``: the running precision
+        after ``result``, 0..1; None: not available)."""
+        with self._lock:
+            msg = self.confirms.encode(result, precision, timestamp=timestamp)
         return self._send(msg)
 
     def send_status(self, status: Status, *, timestamp: float = 0.0) -> can.Message:
@@ -220,41 +256,59 @@ class CanOutput:
             msg = self.status.encode(status, timestamp=timestamp)
         return self._send(msg)
 
+    def send_road_status(self, status: Status, *, timestamp: float = 0.0) -> can.Message:
+        """Encode and send one ``RP_ROAD_STATUS`` frame now."""
+        with self._lock:
+            msg = self.road_status.encode(status, timestamp=timestamp)
+        return self._send(msg)
+
     def update_status(self, status: Status) -> None:
-        """What the next periodic status frames report."""
+        """What the next periodic status frames (both messages) report."""
         self._latest = status
 
-    def _refresh(self, msg: can.Message) -> None:
+    def _refresher(
+        self, encoder: StatusEncoder | RoadStatusEncoder
+    ) -> Callable[[can.Message], None]:
         """python-can's modifier callback: re-encode the periodic frame before each send."""
-        status = self._latest
-        if status is None:  # pragma: no cover - start_status sets it first
-            return
-        with self._lock:
-            fresh = self.status.encode(status)
-        msg.data = fresh.data
-        if self.keep_sent:
-            self.sent.append(fresh)
+
+        def refresh(msg: can.Message) -> None:
+            status = self._latest
+            if status is None:  # pragma: no cover - start_status sets it first
+                return
+            with self._lock:
+                fresh = encoder.encode(status)
+            msg.data = fresh.data
+            if self.keep_sent:
+                self.sent.append(fresh)
+
+        return refresh
 
     def start_status(self, status: Status, period_s: float = STATUS_PERIOD_S) -> None:
-        """Send ``RP_STATUS`` every ``period_s`` from now on (``bus.send_periodic``)."""
-        if self._task is not None:
+        """Send ``RP_STATUS`` and ``RP_ROAD_STATUS`` every ``period_s`` from now on
+        (``bus.send_periodic``)."""
+        if self._tasks:
             raise OperationError("the periodic status is already running")
         self._latest = status
-        message = self.status.message
-        # a template: python-can calls the modifier before every send, the first one included
-        template = can.Message(
-            arbitration_id=message.frame_id,
-            is_extended_id=False,
-            dlc=message.length,
-            data=bytes(message.length),
-        )
         try:
-            self._task = self.bus.send_periodic(template, period_s, modifier_callback=self._refresh)
+            for encoder in (self.status, self.road_status):
+                message = encoder.message
+                # a template: python-can calls the modifier before every send, the first included
+                template = can.Message(
+                    arbitration_id=message.frame_id,
+                    is_extended_id=False,
+                    dlc=message.length,
+                    data=bytes(message.length),
+                )
+                self._tasks.append(
+                    self.bus.send_periodic(
+                        template, period_s, modifier_callback=self._refresher(encoder)
+                    )
+                )
         except (can.CanError, NotImplementedError) as exc:
+            self.stop()
             raise OperationError(f"periodic status on this bus failed ({exc})") from None
 
     def stop(self) -> None:
-        """Stop the periodic status (the bus stays open)."""
-        if self._task is not None:
-            self._task.stop()
-            self._task = None
+        """Stop the periodic status messages (the bus stays open)."""
+        while self._tasks:
+            self._tasks.pop().stop()

@@ -1,13 +1,16 @@
-"""roadpreview's output messages: ``RP_ALERT`` (per anomaly) and ``RP_STATUS`` (every 100 ms).
+"""roadpreview's output messages: per alert ``RP_ALERT`` + ``RP_ALERT_DETAIL``, per checked
+alert ``RP_CONFIRM``, and every 100 ms ``RP_STATUS`` + ``RP_ROAD_STATUS``.
 
-`AlertEncoder` and `StatusEncoder` turn an `Alert` / a `Status` into a
-``can.Message`` through cantools (physical values in, the DBC does the
-bits), with an AUTOSAR E2E profile 1 header: an alive counter per message
-(0..14, +1 per frame) and the CRC from ``autosar-e2e``. Values outside a
-signal's range saturate at its limits (the DBC comments say so); unknown
-values go out as ``SignalNotAvailable``. `OutputDecoder` is the receiving
-side (the chassis ECU, a test, a monitor): it checks CRC and counter and
-gives `ReceivedAlert` / `ReceivedStatus` in SI units, None for "not
+`AlertEncoder`, `AlertDetailEncoder`, `ConfirmEncoder`, `StatusEncoder` and
+`RoadStatusEncoder` turn an `Alert` / a `ConfirmationResult` / a `Status`
+into a ``can.Message`` through cantools (physical values in, the DBC does
+the bits), with an AUTOSAR E2E profile 1 header: an alive counter per
+message (0..14, +1 per frame) and the CRC from ``autosar-e2e``. Values
+outside a signal's range saturate at its limits (the DBC comments say so);
+unknown values go out as ``SignalNotAvailable``. `OutputDecoder` is the
+receiving side (the chassis ECU, a test, a monitor): it checks CRC and
+counter and gives `ReceivedAlert`, `ReceivedAlertDetail`, `ReceivedConfirm`,
+`ReceivedStatus` and `ReceivedRoadStatus` in SI units, None for "not
 available".
 """
 
@@ -27,22 +30,32 @@ from cantools.database.namedsignalvalue import NamedSignalValue
 
 from roadpreview.anomaly.alert import Alert
 from roadpreview.anomaly.base import Side, SuppressionReason
+from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult
+from roadpreview.anomaly.roughness import ISO8608_CLASSES, RoadState
 from roadpreview.canbus.dbc import (
     E2E_COUNTER_MODULUS,
     RP_ALERT,
+    RP_ALERT_DETAIL,
+    RP_CONFIRM,
+    RP_ROAD_STATUS,
     RP_STATUS,
     e2e_layout,
     encode_protected,
     load_database,
 )
 from roadpreview.canbus.decode import signal_values
-from roadpreview.errors import InputDataError
+from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.fusion.mode import FusionMode
 
 log = logging.getLogger(__name__)
 
 SIGNAL_NOT_AVAILABLE = "SignalNotAvailable"
 _DEG = math.pi / 180.0
+_KMH = 1.0 / 3.6  #: m/s per km/h
+#: ``DetailDetector`` code of each detector name (``anomaly.detector``)
+DETECTOR_CODES = {"std": 0, "two-axle": 1}
+#: reference of the G_d(n0) levels on CAN: 10 log10(G_d(n0) / 1e-6 m³)
+GD_REF_M3 = 1e-6
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,6 +72,11 @@ class Status:
     #: input frames dropped since start; the encoder sends the increase since its last frame
     input_errors_total: int = 0
     frames_processed: int = 0  #: camera frames processed since start
+    # --- carried by RP_ROAD_STATUS ---
+    road: RoadState | None = None  #: the road's roughness class estimate (None: unknown)
+    precision: float | None = None  #: running online precision of the checked alerts, 0..1
+    confirmed: int = 0  #: alerts the ego confirmed since start
+    not_felt: int = 0  #: alerts the ego did not feel since start
 
 
 class _ProtectedEncoder:
@@ -113,11 +131,11 @@ class AlertEncoder(_ProtectedEncoder):
         return {
             "AlertSide": int(alert.side),
             "AlertFusionMode": int(alert.mode),
+            "AlertId": alert.alert_id % 256,
             "AlertDistance": self._fit("AlertDistance", alert.distance_m),
             "AlertTimeToArrival": self._fit("AlertTimeToArrival", alert.time_to_arrival_s),
-            "AlertSeverity": self._fit("AlertSeverity", alert.severity_px),
             "AlertHeight": self._fit("AlertHeight", alert.height_mm),
-            "AlertConfidence": self._fit("AlertConfidence", 100.0 * alert.confidence),
+            "AlertConfidence": self._fit("AlertConfidence", _scaled(alert.confidence, 100.0)),
             "AlertEventAge": self._fit("AlertEventAge", age if age >= 0 else None),
         }
 
@@ -125,6 +143,69 @@ class AlertEncoder(_ProtectedEncoder):
         """The next ``RP_ALERT`` frame (time stamp: ``timestamp``, default the alert's emission)."""
         ts = alert.t_emit_s if timestamp is None else timestamp
         return self._frame(self.values(alert), float(ts))
+
+
+class AlertDetailEncoder(_ProtectedEncoder):
+    """`Alert` -> ``RP_ALERT_DETAIL`` frame, sent right after its ``RP_ALERT`` (module docstring).
+
+    ``detector`` names the detector that raised the alert (``anomaly.detector``,
+    a key of `DETECTOR_CODES`); `Alert` does not say."""
+
+    def __init__(self, db: Database | None = None, *, channel: int | str | None = None) -> None:
+        super().__init__(RP_ALERT_DETAIL, db, channel)
+
+    def values(self, alert: Alert, detector: str = "two-axle") -> dict[str, float | int | str]:
+        """The physical signal values (before E2E) of ``alert``'s details."""
+        return {
+            "DetailDetector": detector_code(detector),
+            "AlertId": alert.alert_id % 256,
+            "AlertHeightStd": self._fit("AlertHeightStd", alert.height_std_mm),
+            "AlertLength": self._fit("AlertLength", alert.length_m),
+            "AlertScore": self._fit("AlertScore", alert.severity_px),
+            "AlertLeadSpeed": self._fit("AlertLeadSpeed", _scaled(alert.lead_speed_mps, 1 / _KMH)),
+        }
+
+    def encode(
+        self, alert: Alert, detector: str = "two-axle", *, timestamp: float | None = None
+    ) -> can.Message:
+        """The next ``RP_ALERT_DETAIL`` frame (time stamp: ``timestamp``, default the alert's
+        emission)."""
+        ts = alert.t_emit_s if timestamp is None else timestamp
+        return self._frame(self.values(alert, detector), float(ts))
+
+
+class ConfirmEncoder(_ProtectedEncoder):
+    """`ConfirmationResult` -> ``RP_CONFIRM`` frame (module docstring)."""
+
+    def __init__(self, db: Database | None = None, *, channel: int | str | None = None) -> None:
+        super().__init__(RP_CONFIRM, db, channel)
+
+    def values(
+        self, result: ConfirmationResult, precision: float | None = None, *, t_s: float
+    ) -> dict[str, float | int | str]:
+        """The physical signal values (before E2E) of ``result`` sent at ``t_s``;
+        ``precision``: the running precision after it, 0..1 (None: not available)."""
+        age = t_s - result.t_arrival_s  # NaN when the spot was not reached
+        return {
+            "ConfirmOutcome": int(result.outcome),
+            "ConfirmAlertId": result.alert_id % 256,
+            "ConfirmPeakAccel": self._fit("ConfirmPeakAccel", result.peak_mps2),
+            "ConfirmBackgroundAccel": self._fit("ConfirmBackgroundAccel", result.background_mps2),
+            "ConfirmArrivalAge": self._fit("ConfirmArrivalAge", age),
+            "ConfirmPrecision": self._fit("ConfirmPrecision", _scaled(precision, 100.0)),
+        }
+
+    def encode(
+        self,
+        result: ConfirmationResult,
+        precision: float | None = None,
+        *,
+        timestamp: float | None = None,
+    ) -> can.Message:
+        """The next ``RP_CONFIRM`` frame (time stamp: ``timestamp``, default when the outcome
+        was decided)."""
+        ts = float(result.t_s if timestamp is None else timestamp)
+        return self._frame(self.values(result, precision, t_s=ts), ts)
 
 
 class StatusEncoder(_ProtectedEncoder):
@@ -140,19 +221,17 @@ class StatusEncoder(_ProtectedEncoder):
         ``StatusInputErrors`` is the increase of ``input_errors_total`` since the last
         frame `encode` made (the DBC's "since the previous status frame"), saturating;
         a total that went down (a restarted pipeline) counts from zero again."""
-
-        def scaled(x: float | None, factor: float) -> float | None:
-            return None if x is None else x * factor
-
         return {
             "StatusFusionMode": int(status.mode),
             "StatusSuppression": int(status.suppressed) & 0b111,
-            "StatusPitch": self._fit("StatusPitch", scaled(status.pitch_rad, 1 / _DEG)),
-            "StatusGyroBias": self._fit("StatusGyroBias", scaled(status.gyro_bias_rad_s, 1 / _DEG)),
-            "StatusTextureQuality": self._fit(
-                "StatusTextureQuality", scaled(status.texture_quality, 100.0)
+            "StatusPitch": self._fit("StatusPitch", _scaled(status.pitch_rad, 1 / _DEG)),
+            "StatusGyroBias": self._fit(
+                "StatusGyroBias", _scaled(status.gyro_bias_rad_s, 1 / _DEG)
             ),
-            "StatusTimeOffset": self._fit("StatusTimeOffset", scaled(status.time_offset_s, 1e3)),
+            "StatusTextureQuality": self._fit(
+                "StatusTextureQuality", _scaled(status.texture_quality, 100.0)
+            ),
+            "StatusTimeOffset": self._fit("StatusTimeOffset", _scaled(status.time_offset_s, 1e3)),
             "StatusAlertCount": status.alerts_sent % 16,
             "StatusInputErrors": min(self._new_errors(status), 15),
             "StatusHeartbeat": status.frames_processed % 8,
@@ -169,10 +248,73 @@ class StatusEncoder(_ProtectedEncoder):
         return frame
 
 
-def alert_frames(alerts: Iterable[Alert], encoder: AlertEncoder | None = None) -> list[can.Message]:
-    """``RP_ALERT`` frames of ``alerts`` at their emission times (for `write_can_log`)."""
+class RoadStatusEncoder(_ProtectedEncoder):
+    """`Status` -> ``RP_ROAD_STATUS`` frame, sent with every ``RP_STATUS`` (module docstring)."""
+
+    def __init__(self, db: Database | None = None, *, channel: int | str | None = None) -> None:
+        super().__init__(RP_ROAD_STATUS, db, channel)
+
+    def values(self, status: Status) -> dict[str, float | int | str]:
+        """The physical signal values (before E2E) of ``status``'s road part."""
+        road = status.road or RoadState()
+        return {
+            "RoadClass": road.class_index,
+            "RoadClassEgo": _class_code(road.ego_class),
+            "RoadClassLead": _class_code(road.lead_class),
+            "RoadGdEgo": self._fit("RoadGdEgo", _gd_db(road.ego_gd_n0)),
+            "RoadGdLead": self._fit("RoadGdLead", _gd_db(road.lead_gd_n0)),
+            "OnlinePrecision": self._fit("OnlinePrecision", _scaled(status.precision, 100.0)),
+            "ConfirmedCount": max(status.confirmed, 0) % 256,
+            "NotFeltCount": max(status.not_felt, 0) % 256,
+        }
+
+    def encode(self, status: Status, *, timestamp: float = 0.0) -> can.Message:
+        """The next ``RP_ROAD_STATUS`` frame."""
+        return self._frame(self.values(status), float(timestamp))
+
+
+def detector_code(detector: str) -> int:
+    """The ``DetailDetector`` code of a detector name; `ConfigError` for a name without one."""
+    code = DETECTOR_CODES.get(detector)
+    if code is None:
+        raise ConfigError(
+            f"anomaly.detector = {detector!r}: no DetailDetector code on CAN;"
+            f" one of {sorted(DETECTOR_CODES)}"
+        )
+    return code
+
+
+def _scaled(x: float | None, factor: float) -> float | None:
+    return None if x is None else x * factor
+
+
+def _class_code(iso_class: str | None) -> int:
+    """0 unknown, 1..8 = ISO 8608 A..H."""
+    return 0 if iso_class is None else ISO8608_CLASSES.index(iso_class) + 1
+
+
+def _gd_db(gd_n0_m3: float) -> float | None:
+    """10 log10(G_d(n0) / 1e-6 m³); None when there is no (positive) estimate."""
+    if not (math.isfinite(gd_n0_m3) and gd_n0_m3 > 0):
+        return None
+    return 10.0 * math.log10(gd_n0_m3 / GD_REF_M3)
+
+
+def alert_frames(
+    alerts: Iterable[Alert],
+    encoder: AlertEncoder | None = None,
+    detail_encoder: AlertDetailEncoder | None = None,
+    *,
+    detector: str = "two-axle",
+) -> list[can.Message]:
+    """``RP_ALERT`` + ``RP_ALERT_DETAIL`` frames of ``alerts`` (two per alert, in that order)
+    at their emission times (for `write_can_log`); ``detector``: ``anomaly.detector``."""
     enc = encoder or AlertEncoder()
-    return [enc.encode(a) for a in alerts]
+    detail = detail_encoder or AlertDetailEncoder(enc.db)
+    out: list[can.Message] = []
+    for a in alerts:
+        out += [enc.encode(a), detail.encode(a, detector)]
+    return out
 
 
 # --- receiving ---------------------------------------------------------------------------------
@@ -184,13 +326,13 @@ class ReceivedAlert:
 
     t_rx_s: float  #: reception time stamp of the frame, s
     counter: int  #: E2E alive counter
+    alert_id: int  #: the alert's sequence number, modulo 256
     distance_m: float | None
     time_to_arrival_s: float | None
     event_age_s: float | None
-    severity_px: float
-    height_mm: float | None
+    height_mm: float | None  #: bump +, pothole -
     side: Side
-    confidence: float  #: 0..1
+    confidence: float | None  #: 0..1
     mode: FusionMode
 
     @property
@@ -199,6 +341,39 @@ class ReceivedAlert:
         if self.time_to_arrival_s is None or self.event_age_s is None:
             return None
         return self.time_to_arrival_s - self.event_age_s
+
+
+@dataclass(frozen=True, slots=True)
+class ReceivedAlertDetail:
+    """An ``RP_ALERT_DETAIL`` frame as a receiver sees it (SI units; None: not available)."""
+
+    t_rx_s: float
+    counter: int
+    alert_id: int  #: the ``RP_ALERT`` it details (sequence number modulo 256)
+    detector: str  #: "std" or "two-axle" (``anomaly.detector``)
+    height_std_mm: float | None
+    length_m: float | None
+    score: float | None  #: the detector's score (std: px; two-axle: background stds)
+    lead_speed_mps: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class ReceivedConfirm:
+    """An ``RP_CONFIRM`` frame as a receiver sees it (SI units; None: not available)."""
+
+    t_rx_s: float
+    counter: int
+    alert_id: int  #: the alert checked (sequence number modulo 256)
+    outcome: Confirmation
+    peak_mps2: float | None  #: the ego's peak vertical acceleration at the spot
+    background_mps2: float | None  #: the ego's background level then
+    arrival_age_s: float | None  #: from the front axle's arrival at the spot to the frame
+    precision: float | None  #: running precision after this outcome, 0..1
+
+    @property
+    def t_arrival_s(self) -> float | None:
+        """When the ego's front axle reached the spot, on the receiver's clock (None if not)."""
+        return None if self.arrival_age_s is None else self.t_rx_s - self.arrival_age_s
 
 
 @dataclass(frozen=True, slots=True)
@@ -218,20 +393,42 @@ class ReceivedStatus:
     heartbeat: int  #: camera frames processed, modulo 8
 
 
+@dataclass(frozen=True, slots=True)
+class ReceivedRoadStatus:
+    """An ``RP_ROAD_STATUS`` frame as a receiver sees it (SI units; None: not available)."""
+
+    t_rx_s: float
+    counter: int
+    iso_class: str | None  #: reported ISO 8608 class "A".."H"
+    ego_class: str | None  #: from the ego's vertical acceleration
+    lead_class: str | None  #: from the lead's motion (the road ahead)
+    ego_gd_n0: float | None  #: G_d(n0) of the road under the ego, m³
+    lead_gd_n0: float | None  #: G_d(n0) of the road ahead, m³
+    precision: float | None  #: online precision of the checked alerts, 0..1
+    confirmed: int  #: confirmed alerts, modulo 256
+    not_felt: int  #: not-felt alerts, modulo 256
+
+
+#: what `OutputDecoder.decode` gives for a good frame
+ReceivedOutput = (
+    ReceivedAlert | ReceivedAlertDetail | ReceivedConfirm | ReceivedStatus | ReceivedRoadStatus
+)
+_OUTPUTS = (RP_ALERT, RP_ALERT_DETAIL, RP_CONFIRM, RP_STATUS, RP_ROAD_STATUS)
+
+
 class OutputDecoder:
     """Decode roadpreview's output frames; CRC and counter checked, bad frames counted.
 
-    ``decode`` returns None for a frame that is not ``RP_ALERT`` / ``RP_STATUS``
-    or fails a check; ``problems`` counts the reasons (``crc``, ``length``,
+    ``decode`` returns None for a frame that is not one of roadpreview's outputs
+    (``RP_ALERT``, ``RP_ALERT_DETAIL``, ``RP_CONFIRM``, ``RP_STATUS``,
+    ``RP_ROAD_STATUS``) or fails a check; ``problems`` counts the reasons (``crc``, ``length``,
     ``counter_repeated``) and ``lost`` the frames a counter jump says were
     missed.
     """
 
     def __init__(self, db: Database | None = None) -> None:
         self.db = db or load_database()
-        self._messages = {
-            m.frame_id: m for m in (self.db.get_message_by_name(n) for n in (RP_ALERT, RP_STATUS))
-        }
+        self._messages = {m.frame_id: m for m in (self.db.get_message_by_name(n) for n in _OUTPUTS)}
         self._layouts = {fid: e2e_layout(m) for fid, m in self._messages.items()}
         self._last_counter: dict[int, int] = {}
         self.problems: Counter[str] = Counter()
@@ -260,8 +457,8 @@ class OutputDecoder:
         self._last_counter[m.frame_id] = counter
         return m, dict(signal_values(m, data)), counter
 
-    def decode(self, msg: can.Message) -> ReceivedAlert | ReceivedStatus | None:
-        """The content of one output frame, or None (module docstring)."""
+    def decode(self, msg: can.Message) -> ReceivedOutput | None:
+        """The content of one output frame, or None (class docstring)."""
         checked = self._check(msg)
         if checked is None:
             return None
@@ -277,19 +474,63 @@ class OutputDecoder:
             x = v[name]
             return int(x.value) if isinstance(x, NamedSignalValue) else int(x)  # type: ignore[call-overload]
 
+        def iso(name: str) -> str | None:
+            k = code(name)
+            return ISO8608_CLASSES[k - 1] if 1 <= k <= len(ISO8608_CLASSES) else None
+
+        def gd(name: str) -> float | None:
+            level = opt(name)
+            return None if level is None else GD_REF_M3 * 10.0 ** (level / 10.0)
+
         t = float(msg.timestamp)
         if m.name == RP_ALERT:
             return ReceivedAlert(
                 t_rx_s=t,
                 counter=counter,
+                alert_id=code("AlertId"),
                 distance_m=opt("AlertDistance"),
                 time_to_arrival_s=opt("AlertTimeToArrival"),
                 event_age_s=opt("AlertEventAge"),
-                severity_px=float(opt("AlertSeverity") or 0.0),
                 height_mm=opt("AlertHeight"),
                 side=Side(code("AlertSide")),
-                confidence=float(opt("AlertConfidence", 0.01) or 0.0),
+                confidence=opt("AlertConfidence", 0.01),
                 mode=FusionMode(code("AlertFusionMode")),
+            )
+        if m.name == RP_ALERT_DETAIL:
+            detectors = {c: n for n, c in DETECTOR_CODES.items()}
+            return ReceivedAlertDetail(
+                t_rx_s=t,
+                counter=counter,
+                alert_id=code("AlertId"),
+                detector=detectors.get(code("DetailDetector"), "unknown"),
+                height_std_mm=opt("AlertHeightStd"),
+                length_m=opt("AlertLength"),
+                score=opt("AlertScore"),
+                lead_speed_mps=opt("AlertLeadSpeed", _KMH),
+            )
+        if m.name == RP_CONFIRM:
+            return ReceivedConfirm(
+                t_rx_s=t,
+                counter=counter,
+                alert_id=code("ConfirmAlertId"),
+                outcome=Confirmation(code("ConfirmOutcome")),
+                peak_mps2=opt("ConfirmPeakAccel"),
+                background_mps2=opt("ConfirmBackgroundAccel"),
+                arrival_age_s=opt("ConfirmArrivalAge"),
+                precision=opt("ConfirmPrecision", 0.01),
+            )
+        if m.name == RP_ROAD_STATUS:
+            return ReceivedRoadStatus(
+                t_rx_s=t,
+                counter=counter,
+                iso_class=iso("RoadClass"),
+                ego_class=iso("RoadClassEgo"),
+                lead_class=iso("RoadClassLead"),
+                ego_gd_n0=gd("RoadGdEgo"),
+                lead_gd_n0=gd("RoadGdLead"),
+                precision=opt("OnlinePrecision", 0.01),
+                confirmed=code("ConfirmedCount"),
+                not_felt=code("NotFeltCount"),
             )
         return ReceivedStatus(
             t_rx_s=t,

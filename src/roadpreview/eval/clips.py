@@ -45,14 +45,28 @@ def hard_window(score_window: tuple[float, float] = SCORE_WINDOW_S) -> tuple[flo
     return score_window[0] - DETECTOR_WINDOW_S, score_window[1]
 
 
+@dataclass(frozen=True)
+class Scores:
+    """A detector's score per frame of one trace: ``s`` describes the time ``t`` (the
+    windowed std: the frame's time; the two-axle detector: the crossing it hypothesises,
+    not monotonic in the frame order)."""
+
+    t: Array
+    s: Array
+
+
 def window_max(
     t: Array, s: Array, center: float, window: tuple[float, float] = SCORE_WINDOW_S
 ) -> tuple[float, bool]:
-    """The maximum of the finite s in ``[center + a, center + b]`` and whether there was
-    one (False: no lead in the window, the score is 0)."""
-    lo = int(np.searchsorted(t, center + window[0], side="left"))
-    hi = int(np.searchsorted(t, center + window[1], side="right"))
-    seg = s[lo:hi]
+    """The maximum of the finite s whose time lies in ``[center + a, center + b]`` and
+    whether there was one (False: no lead in the window, the score is 0)."""
+    lo_t, hi_t = center + window[0], center + window[1]
+    if t.size < 2 or bool(np.all(np.diff(t) > 0)):
+        lo = int(np.searchsorted(t, lo_t, side="left"))
+        hi = int(np.searchsorted(t, hi_t, side="right"))
+        seg = s[lo:hi]
+    else:
+        seg = s[(t >= lo_t) & (t <= hi_t)]
     seg = seg[np.isfinite(seg)]
     if seg.size == 0:
         return 0.0, False
@@ -60,13 +74,13 @@ def window_max(
 
 
 def clip_scores(
-    trace: Trace, centers: Iterable[float], window: tuple[float, float] = SCORE_WINDOW_S
+    scores: Scores, centers: Iterable[float], window: tuple[float, float] = SCORE_WINDOW_S
 ) -> tuple[Array, BoolArray]:
-    """`window_max` of one trace at each centre: (scores, has_lead)."""
-    out = [window_max(trace.t, trace.s, c, window) for c in centers]  # clips, not frames
-    scores = np.asarray([o[0] for o in out], dtype=np.float64)
+    """`window_max` of one trace's scores at each centre: (scores, has_lead)."""
+    out = [window_max(scores.t, scores.s, c, window) for c in centers]  # clips, not frames
+    values = np.asarray([o[0] for o in out], dtype=np.float64)
     found = np.asarray([o[1] for o in out], dtype=np.bool_)
-    return scores, found
+    return values, found
 
 
 def draw_clips(
@@ -196,13 +210,17 @@ def tracked_clips(
 
 def score_table(
     clips_by_recording: Mapping[str, list[Clip]],
-    traces_by_recording: Mapping[str, Mapping[str, Trace]],
+    scores_by_recording: Mapping[str, Mapping[str, Scores]],
     truth_by_recording: Mapping[str, Mapping[str, Array]],
     window: tuple[float, float] = SCORE_WINDOW_S,
+    *,
+    boxes_by_recording: Mapping[str, Trace],
+    tracked_window: tuple[float, float] = SCORE_WINDOW_S,
 ) -> ClipTable:
     """All clips of a data set with every method's score (recording key -> clips,
-    -> method traces, -> truth arrays ``frame_t_s``, ``lead_distance_m`` and
-    ``lead_box_px``), with the mask ``tracked`` (`tracked_clips`)."""
+    -> method scores, -> truth arrays ``frame_t_s``, ``lead_distance_m`` and
+    ``lead_box_px``), with the mask ``tracked`` (`tracked_clips` of the recording's trace
+    in ``boxes_by_recording`` over ``tracked_window``)."""
     clips: list[Clip] = []
     scores: dict[str, list[Array]] = {}
     found: dict[str, list[BoolArray]] = {}
@@ -213,15 +231,14 @@ def score_table(
             continue
         clips += rec_clips
         centers = [c.t_center_s for c in rec_clips]
-        traces = traces_by_recording[key]
-        for m, tr in traces.items():
-            sc, ok = clip_scores(tr, centers, window)
-            scores.setdefault(m, []).append(sc)
+        for m, sc in scores_by_recording[key].items():
+            values, ok = clip_scores(sc, centers, window)
+            scores.setdefault(m, []).append(values)
             found.setdefault(m, []).append(ok)
         truth = truth_by_recording[key]
         dist.append(np.interp(centers, truth["frame_t_s"], truth["lead_distance_m"]))
-        any_trace = next(iter(traces.values()))
-        tracked.append(tracked_clips(any_trace, truth["lead_box_px"], centers, window))
+        boxes = boxes_by_recording[key]
+        tracked.append(tracked_clips(boxes, truth["lead_box_px"], centers, tracked_window))
     return ClipTable(
         clips=clips,
         scores={m: np.concatenate(v) for m, v in scores.items()},

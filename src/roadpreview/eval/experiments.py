@@ -20,16 +20,18 @@ import json
 import math
 import zlib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from roadpreview.anomaly import DETECTORS, TrajectorySample, make_detector
 from roadpreview.eval.clips import (
     DETECTOR_WINDOW_S,
     ClipTable,
+    Scores,
     background_windows,
     clip_scores,
     draw_clips,
@@ -38,6 +40,7 @@ from roadpreview.eval.clips import (
     window_max,
 )
 from roadpreview.eval.cv import ENTIRE, cross_validate
+from roadpreview.eval.detectors import DetectorTrace, run_detector
 from roadpreview.eval.methods import METHODS, MethodSpec
 from roadpreview.eval.metrics import auc, best_f_threshold, confusion, roc_curve
 from roadpreview.eval.plan import EvalPlan, gap_name
@@ -55,6 +58,7 @@ _TRUTH_KEYS = (
     "lead_box_px",
     "lead_rear_px",
     "cam_z_m",
+    "ego_speed_m_s",
 )
 
 #: the ceiling's camera heave: its height less its centred running mean over this span (the
@@ -80,6 +84,7 @@ class EvalData:
     _truth: dict[str, dict[str, Array]] = field(default_factory=dict)
     _info: dict[str, dict[str, Any]] = field(default_factory=dict)
     _tables: dict[str, ClipTable] = field(default_factory=dict)
+    _runs: dict[tuple[str, str, str], DetectorTrace] = field(default_factory=dict)
 
     @property
     def method_names(self) -> list[str]:
@@ -99,6 +104,56 @@ class EvalData:
                 self._truth[job.key] = {k: np.asarray(npz[k]) for k in _TRUTH_KEYS}
         return self._truth[job.key]
 
+    @property
+    def detectors(self) -> list[str]:
+        """Every detector of the registry, the paper's first."""
+        return ["std", *(d for d in DETECTORS if d != "std")]
+
+    @property
+    def product_detector(self) -> str:
+        """The detector the product runs (the reference method's configuration)."""
+        return self.methods.configs[self.methods.reference].anomaly.detector
+
+    def detection(
+        self, job: RecordingJob, method: str, detector: str | None = None
+    ) -> DetectorTrace:
+        """``detector`` (default: the product's) over ``method``'s trace of ``job``."""
+        name = detector or self.product_detector
+        key = (job.key, method, name)
+        if key not in self._runs:
+            anomaly = self.methods.configs[method].anomaly
+            self._runs[key] = run_detector(self.traces(job)[method], anomaly, name)
+        return self._runs[key]
+
+    def detection_at(
+        self, job: RecordingJob, method: str, detector: str, threshold: float
+    ) -> DetectorTrace:
+        """``detector`` on ``method``'s trace of ``job`` with its threshold set to
+        ``threshold`` (its `THRESHOLD_FIELDS` entry): an operating point."""
+        from roadpreview.eval.product import THRESHOLD_FIELDS
+
+        key = (job.key, method, f"{detector}@{threshold:g}")
+        if key not in self._runs:
+            anomaly = self.methods.configs[method].anomaly
+            field_name = DETECTORS[detector][2]
+            table = replace(getattr(anomaly, field_name), **{THRESHOLD_FIELDS[detector]: threshold})
+            anomaly = replace(anomaly, **{field_name: table})
+            self._runs[key] = run_detector(self.traces(job)[method], anomaly, detector)
+        return self._runs[key]
+
+    def scores(self, job: RecordingJob, detector: str = "std") -> dict[str, Scores]:
+        """Every method's per-frame score of ``detector`` on ``job`` (the paper's
+        experiments use the windowed std, its s at the frame's time)."""
+        out = {}
+        for m in self.method_names:
+            run = self.detection(job, m, detector)
+            out[m] = Scores(run.t_score, run.score)
+        return out
+
+    def score_window(self, detector: str) -> tuple[float, float]:
+        """The clip window of ``detector``'s scores (relative to the clip centre)."""
+        return self.plan.score_windows.get(detector, self.plan.score_window_s)
+
     def info(self, job: RecordingJob) -> dict[str, Any]:
         if job.key not in self._info:
             self._info[job.key] = json.loads((job.folder / "truth.json").read_text())
@@ -107,10 +162,16 @@ class EvalData:
     def focal_px(self, job: RecordingJob) -> float:
         return float(job.scenario.camera_model().fy)
 
-    def clip_table(self, dataset: str, jobs: Sequence[RecordingJob] | None = None) -> ClipTable:
-        """Clips of a data set (or of the given jobs) with every method's score."""
+    def clip_table(
+        self,
+        dataset: str,
+        jobs: Sequence[RecordingJob] | None = None,
+        detector: str = "std",
+    ) -> ClipTable:
+        """Clips of a data set (or of the given jobs) with every method's score of
+        ``detector`` (the paper's windowed std by default)."""
         jobs = list(jobs if jobs is not None else self.jobs[dataset])
-        key = dataset + "|" + ",".join(j.key for j in jobs)
+        key = dataset + "|" + detector + "|" + ",".join(j.key for j in jobs)
         if key not in self._tables:
             plan = self.plan
             clips = {
@@ -129,9 +190,11 @@ class EvalData:
             }
             self._tables[key] = score_table(
                 clips,
-                {j.key: self.traces(j) for j in jobs},
+                {j.key: self.scores(j, detector) for j in jobs},
                 {j.key: self.truth(j) for j in jobs},
-                plan.score_window_s,
+                self.score_window(detector),
+                boxes_by_recording={j.key: self.traces(j)[self.methods.reference] for j in jobs},
+                tracked_window=plan.score_window_s,
             )
         return self._tables[key]
 
@@ -202,7 +265,7 @@ def e1_signal_vs_distance(data: EvalData, fig_dir: Path) -> dict[str, Any]:
         bg_by_gap: dict[float, Array] = {}
         for job in jobs:
             gap = float(job.scenario.motion.gap_m)
-            info, tr = data.info(job), data.traces(job)[m]
+            info, tr = data.info(job), data.scores(job)[m]
             f = data.focal_px(job)
             lead = [
                 e
@@ -343,7 +406,9 @@ def e2_ego_bump(data: EvalData, fig_dir: Path) -> dict[str, Any]:
     out: dict[str, Any] = {"recording": job.key, "ego_crossing_s": te, "window_s": [lo, hi]}
     rows = {}
     curves = {}
+    std_scores = data.scores(job)
     for m, tr in traces.items():
+        s_m = std_scores[m].s
         t = tr.t
         sel = (t >= lo) & (t <= hi)
         ref = (t >= lo) & (t < lo + 1.0)
@@ -360,7 +425,7 @@ def e2_ego_bump(data: EvalData, fig_dir: Path) -> dict[str, Any]:
             if np.isfinite(e_win).any()
             else None,
             "rms_error_hp_drive_deg": _f(np.degrees(_rms(hp))),
-            "s_max_window_px": _f(np.nanmax(tr.s[sel])) if np.isfinite(tr.s[sel]).any() else None,
+            "s_max_window_px": _f(np.nanmax(s_m[sel])) if np.isfinite(s_m[sel]).any() else None,
         }
         curves[m] = (t[sel], tr["phi"][sel] - offset, yc[sel] - yc0)
     out["methods"] = rows
@@ -389,7 +454,7 @@ def e2_ego_bump(data: EvalData, fig_dir: Path) -> dict[str, Any]:
 def windowed_std(t: Array, y: Array, window_s: float, detrend: bool) -> Array:
     """s(t): the std of ``y`` over the frames in the last ``window_s`` (NaN until the first
     full window), about its least-squares line when ``detrend`` (the detector's
-    `anomaly.detector.detrend`), vectorised over frames with a sliding window of the
+    `anomaly.std.detrend`), vectorised over frames with a sliding window of the
     frame count that spans ``window_s`` at the median frame rate."""
     n = len(t)
     out = np.full(n, np.nan)
@@ -426,20 +491,60 @@ def ceiling_s(truth: Mapping[str, Array], f_px: float, window_s: float, detrend:
     return windowed_std(t, yc, window_s, detrend)
 
 
-def _ceiling_scores(data: EvalData, table: ClipTable) -> Array:
-    """`ceiling_s` of each clip's recording, scored like a method (`window_max`)."""
-    det = data.methods.configs[data.methods.reference].anomaly.detector
+def true_trajectory(truth: Mapping[str, Array], f_px: float) -> list[TrajectorySample]:
+    """The *true* compensated trajectory as detector input: the rendered row of the lead's
+    rear centre less the camera's true pitch and heave (`ceiling_s`), with the true
+    distance and ego speed; no halves (the truth has none)."""
+    t = np.asarray(truth["frame_t_s"], dtype=np.float64)
+    y = np.asarray(truth["lead_rear_px"], dtype=np.float64)[:, 1]
+    z = np.asarray(truth["cam_z_m"], dtype=np.float64)
+    d = np.asarray(truth["lead_distance_m"], dtype=np.float64)
+    k = max(1, round(CEILING_HEAVE_SPAN_S / float(np.median(np.diff(t)))) | 1)
+    mean = np.convolve(np.pad(z, (k // 2, k // 2), mode="edge"), np.ones(k) / k, mode="valid")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        yc = y - f_px * np.tan(np.asarray(truth["cam_pitch_rad"])) - f_px * (z - mean) / d
+    v = np.asarray(truth["ego_speed_m_s"], dtype=np.float64)
+    return [
+        TrajectorySample(
+            t=float(t[i]),
+            y_c=float(yc[i]),
+            lead_distance_m=float(d[i]),
+            ego_speed_mps=float(v[i]),
+            valid=bool(np.isfinite(yc[i])),
+            focal_px=f_px,
+        )
+        for i in range(t.size)
+    ]
+
+
+def _ceiling_scores(data: EvalData, table: ClipTable, detector: str = "std") -> Array:
+    """The detector on each clip's recording's true compensated trajectory, scored like a
+    method (`window_max`): the windowed std by `ceiling_s`, any other through
+    `true_trajectory`."""
+    ref = data.methods.configs[data.methods.reference].anomaly
     by_key = {j.key: j for j in data.jobs["wild"]}
     cache: dict[str, tuple[Array, Array]] = {}
+    window = data.score_window(detector)
     out = np.zeros(len(table))
     for i, c in enumerate(table.clips):  # clips, not frames
         if c.recording not in cache:
             job = by_key[c.recording]
             tr = data.truth(job)
-            s = ceiling_s(tr, data.focal_px(job), det.window_s, det.detrend)
-            cache[c.recording] = (np.asarray(tr["frame_t_s"], dtype=np.float64), s)
+            f = data.focal_px(job)
+            if detector == "std":
+                s = ceiling_s(tr, f, ref.std.window_s, ref.std.detrend)
+                cache[c.recording] = (np.asarray(tr["frame_t_s"], dtype=np.float64), s)
+            else:
+                det = make_detector(replace(ref, detector=detector), f)
+                ts, ss = [], []
+                for sample in true_trajectory(tr, f):
+                    det.push(sample)
+                    fr = det.frame
+                    ts.append(fr.t_score if fr else math.nan)
+                    ss.append(fr.score if fr else math.nan)
+                cache[c.recording] = (np.asarray(ts), np.asarray(ss))
         t, s = cache[c.recording]
-        out[i] = window_max(t, s, c.t_center_s, data.plan.score_window_s)[0]
+        out[i] = window_max(t, s, c.t_center_s, window)[0]
     return out
 
 
@@ -490,9 +595,48 @@ def _subset_results(cv: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
     }
 
 
+def _table1(
+    data: EvalData, table: ClipTable, scores: Mapping[str, Array], subsets: Mapping[str, BoolArray]
+) -> tuple[dict[str, Any], dict[str, dict[str, tuple[Array, Array]]]]:
+    """Table I cells (cross-validated BA and F, AUC) of every scored method, and ROCs."""
+    plan = data.plan
+    labels, hard = table.labels, table.hard
+    res: dict[str, Any] = {}
+    rocs: dict[str, dict[str, tuple[Array, Array]]] = {}
+    for m, sc in scores.items():
+        cv = cross_validate(
+            sc, labels, subsets=subsets, groups=table.groups, k=plan.cv_k, seed=plan.cv_seed
+        )
+        fold_thr = [fr.threshold for fr in cv[ENTIRE].folds]
+        thr_all = best_f_threshold(sc, labels)
+        c_default = confusion(sc, labels, 1.0)
+        c_best = confusion(sc, labels, thr_all)
+        res[m] = {
+            "subsets": _subset_results(cv),
+            "fold_thresholds_px": [_f(v) for v in fold_thr],
+            "threshold_f_max_px": _f(thr_all),
+            "at_f_max": {"tpr": _f(c_best.tpr), "fpr": _f(c_best.fpr), "f": _f(c_best.f_score)},
+            "at_1px": {
+                "tpr": _f(c_default.tpr),
+                "fpr": _f(c_default.fpr),
+                "f": _f(c_default.f_score),
+            },
+            "no_lead_clips": int((~table.has_lead[m]).sum()) if m in table.has_lead else 0,
+        }
+        rocs[m] = {}
+        for name, mask in (("entire", np.ones_like(labels)), ("hard", hard)):
+            if labels[mask].any() and (~labels[mask]).any():
+                fpr, tpr, _ = roc_curve(sc[mask], labels[mask])
+                rocs[m][name] = (fpr, tpr)
+    return res, rocs
+
+
 def e4_table1(data: EvalData, fig_dir: Path) -> dict[str, Any]:
     """5-fold cross-validated BA and F-score at the F-maximising threshold (chosen on the
-    training folds), AUC; entire / hard / easy subsets of the wild set; ROC curves."""
+    training folds), AUC; entire / hard / easy subsets of the wild set; ROC curves. The
+    paper's detector (windowed std) first, then every other detector of the registry on
+    the same clips and methods, each with the data set's ceiling (the detector on the true
+    compensated trajectory)."""
     plan = data.plan
     table = data.clip_table("wild")
     labels, hard = table.labels, table.hard
@@ -504,39 +648,22 @@ def e4_table1(data: EvalData, fig_dir: Path) -> dict[str, Any]:
         "tracked-hard": tracked & hard,
         "tracked-easy": tracked & ~hard,
     }
-    res: dict[str, Any] = {}
-    rocs: dict[str, dict[str, tuple[Array, Array]]] = {}
-    for m in data.method_names:
-        scores = table.scores[m]
-        cv = cross_validate(
-            scores,
-            labels,
-            subsets=subsets,
-            groups=table.groups,
-            k=plan.cv_k,
-            seed=plan.cv_seed,
-        )
-        fold_thr = [fr.threshold for fr in cv[ENTIRE].folds]
-        thr_all = best_f_threshold(scores, labels)
-        c_default = confusion(scores, labels, 1.0)
-        c_best = confusion(scores, labels, thr_all)
-        res[m] = {
-            "subsets": _subset_results(cv),
-            "fold_thresholds_px": [_f(v) for v in fold_thr],
-            "threshold_f_max_px": _f(thr_all),
-            "at_f_max": {"tpr": _f(c_best.tpr), "fpr": _f(c_best.fpr), "f": _f(c_best.f_score)},
-            "at_1px": {
-                "tpr": _f(c_default.tpr),
-                "fpr": _f(c_default.fpr),
-                "f": _f(c_default.f_score),
-            },
-            "no_lead_clips": int((~table.has_lead[m]).sum()),
+    res, rocs = _table1(data, table, {m: table.scores[m] for m in data.method_names}, subsets)
+    detectors: dict[str, Any] = {}
+    for det in data.detectors:
+        if det == "std":
+            continue
+        t_det = data.clip_table("wild", detector=det)
+        d_res, _ = _table1(data, t_det, {m: t_det.scores[m] for m in data.method_names}, subsets)
+        ceil = _ceiling_scores(data, t_det, det)
+        c_res, _ = _table1(data, t_det, {"ceiling": ceil}, subsets)
+        detectors[det] = {
+            "methods": d_res,
+            "ceiling": c_res["ceiling"],
+            "by_signal": _auc_by_signal(
+                data, t_det, {"ceiling": ceil, **{m: t_det.scores[m] for m in data.method_names}}
+            ),
         }
-        rocs[m] = {}
-        for name, mask in (("entire", np.ones_like(labels)), ("hard", hard)):
-            if labels[mask].any() and (~labels[mask]).any():
-                fpr, tpr, _ = roc_curve(scores[mask], labels[mask])
-                rocs[m][name] = (fpr, tpr)
     # the data set's ceiling: the true compensated trajectory, cross-validated the same way
     ceiling = _ceiling_scores(data, table)
     cv_ceiling = cross_validate(
@@ -581,6 +708,7 @@ def e4_table1(data: EvalData, fig_dir: Path) -> dict[str, Any]:
         "methods": res,
         "ceiling": res_ceiling,
         "by_signal": by_signal,
+        "detectors": detectors,
         "figure": _save(fig, fig_dir / "e4_roc.png"),
     }
 
@@ -619,8 +747,8 @@ def e3_fpr_vs_rotation(
         intensity.append(
             mean_abs_rate(truth["frame_t_s"], rate, centers + a - DETECTOR_WINDOW_S, centers + b)
         )
-        for m, tr in data.traces(job).items():
-            scores[m].append(clip_scores(tr, centers, plan.score_window_s)[0])
+        for m, sc in data.scores(job).items():
+            scores[m].append(clip_scores(sc, centers, plan.score_window_s)[0])
     x = np.concatenate(intensity) if intensity else np.empty(0)
     edges: Array = (
         np.unique(np.nanquantile(x, np.linspace(0, 1, plan.e3_bins + 1))) if x.size else np.empty(0)
@@ -856,7 +984,7 @@ def e5_lead_time(data: EvalData, fig_dir: Path) -> dict[str, Any]:
             info = data.info(job)
             dur = float(info["duration_s"])
             rep = match_alerts(
-                data.traces(job)[m].alert_list(),
+                data.detection(job, m).alerts,
                 info["events"],
                 t0=0.0,
                 duration_s=dur,

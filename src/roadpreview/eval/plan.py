@@ -8,21 +8,27 @@ regenerate each drive with ``roadpreview simulate`` or `write_recording`.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from roadpreview.errors import ConfigError
 from roadpreview.eval.clips import SCORE_WINDOW_S
 from roadpreview.eval.runner import RecordingJob
-from roadpreview.sim.presets import controlled, texture_loss, wild
+from roadpreview.sim.presets import (
+    GENERALIZATION_DRIVES,
+    controlled,
+    generalization_drive,
+    texture_loss,
+    wild,
+)
 from roadpreview.sim.road import paper_speed_bump
 from roadpreview.sim.scenario import ScenarioConfig
 
 Size = tuple[int, int]
 
 #: experiment ids, in report order
-EXPERIMENTS = ("e1", "e2", "e3", "e4", "e5")
+EXPERIMENTS = ("e1", "e2", "e3", "e4", "e5", "e6")
 
 #: the ego's front axle at t = 0 and the lead's front axle ahead of it beyond the gap, m
 #: (measured on the controlled preset: lead front = ego front + gap + 4.5 m)
@@ -35,7 +41,9 @@ class EvalPlan:
     """Every parameter of one evaluation run (written into the report)."""
 
     name: str  #: "quick" or "full"
-    seed: int = 0  #: base seed: wild drive i has seed + i, texture-loss seed + 1000 + i
+    #: base seed: wild drive i has seed + i, texture-loss seed + 1000 + i, generalization
+    #: drive i (its place in the whole suite) seed + 2000 + i
+    seed: int = 0
     # -- wild (Table I, E3, lead time) --
     wild_drives: int = 22
     wild_duration_s: float = 60.0
@@ -46,6 +54,10 @@ class EvalPlan:
     texture_drives: int = 3
     texture_duration_s: float = 60.0
     texture_size: Size = (1280, 720)
+    # -- generalization (E4): drives whose parameters no detector is tuned on --
+    #: names from `roadpreview.sim.presets.GENERALIZATION_DRIVES`; each drive fixes its own
+    #: camera, duration and lead vehicle. Empty: no generalization data set
+    generalization_drives: tuple[str, ...] = GENERALIZATION_DRIVES
     # -- controlled (E1, E2) --
     e1_gaps_m: tuple[float, ...] = (3, 5, 7, 10, 13, 16, 20, 25, 30, 35, 40)
     e1_size: Size = (1920, 1080)
@@ -61,6 +73,12 @@ class EvalPlan:
     distance_bins_m: tuple[float, ...] = (0, 10, 15, 20, 25, 30, 40)
     # -- clips and scores --
     score_window_s: tuple[float, float] = SCORE_WINDOW_S
+    #: the clip window per detector, around the time its score describes (the windowed std:
+    #: the frame, lagging the crossing by up to its 1 s window; the two-axle detector: the
+    #: front axle's crossing it hypothesises, the same 1.4 s wide centred on it)
+    score_windows: dict[str, tuple[float, float]] = field(
+        default_factory=lambda: {"std": SCORE_WINDOW_S, "two-axle": (-0.7, 0.7)}
+    )
     clip_half_s: float = 2.5  #: positives need this much recording on each side
     clearance_s: float = 2.0  #: background clips this far from any lead crossing
     background_spacing_s: float = 2.5  #: background clips at least this far apart
@@ -94,6 +112,7 @@ class EvalPlan:
             texture_drives=1,
             texture_duration_s=14.0,
             texture_size=(640, 360),
+            generalization_drives=(),
             e1_gaps_m=(5, 10, 20),
             e1_size=(640, 360),
             e1_short_crossings_s=(2.5, 5.0),
@@ -113,6 +132,12 @@ class EvalPlan:
             )
         if self.e2_gap_m not in self.e1_gaps_m:
             raise ConfigError(f"plan {self.name}: e2_gap_m {self.e2_gap_m} not in e1_gaps_m")
+        unknown = [n for n in self.generalization_drives if n not in GENERALIZATION_DRIVES]
+        if unknown:
+            raise ConfigError(
+                f"plan {self.name}: generalization_drives {unknown} unknown; choose from"
+                f" {list(GENERALIZATION_DRIVES)}"
+            )
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -128,6 +153,12 @@ class EvalPlan:
     def texture_scenario(self, i: int) -> ScenarioConfig:
         cfg = texture_loss(self.seed + 1000 + i, duration_s=self.texture_duration_s)
         return _sized(cfg, self.texture_size)
+
+    def generalization_scenario(self, name: str) -> ScenarioConfig:
+        """Suite drive ``name`` with seed + 2000 + its index in the whole suite (so a drive
+        keeps its seed whichever drives a plan selects)."""
+        seed = self.seed + 2000 + GENERALIZATION_DRIVES.index(name)
+        return generalization_drive(name, seed)
 
     def controlled_scenario(self, gap_m: float) -> ScenarioConfig:
         cfg = controlled(self.seed, gap_m=float(gap_m))
@@ -147,7 +178,7 @@ class EvalPlan:
     def jobs(self, root: Path, experiments: tuple[str, ...]) -> dict[str, list[RecordingJob]]:
         """The recordings each data set needs for ``experiments`` (data set -> jobs)."""
         out: dict[str, list[RecordingJob]] = {}
-        if {"e3", "e4", "e5"} & set(experiments):
+        if {"e3", "e4", "e5", "e6"} & set(experiments):
             out["wild"] = [
                 RecordingJob(
                     "wild",
@@ -185,6 +216,11 @@ class EvalPlan:
             out["controlled"] = [
                 RecordingJob("controlled", gap_name(g), self.controlled_scenario(g), root)
                 for g in gaps
+            ]
+        if "e6" in experiments and self.generalization_drives:
+            out["generalization"] = [
+                RecordingJob("generalization", name, self.generalization_scenario(name), root)
+                for name in self.generalization_drives
             ]
         return out
 

@@ -269,7 +269,7 @@ def _methods_section(d: Mapping[str, Any], w: Any) -> None:
         "Everything else is the default `PipelineConfig` (or the `--config` file): vision "
         "(motion finder), detector and alerts. The reference method `fused-kalman` runs the "
         "vision front end; its fused pitch is the vision's horizon for every method. "
-        "Detector (`[anomaly.detector]`):"
+        "Detector (`[anomaly.std]`):"
     )
     w("")
     det = d["detector"]
@@ -474,7 +474,7 @@ def _e4_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
         w(
             f"For `fused-kalman` the F-maximising threshold on the whole set is {thr:.2f} px at "
             f"{e4['size'][0]}x{e4['size'][1]} against the product default "
-            "`anomaly.detector.threshold_px` = 1.0 px. Signals and the pitch residual scale with "
+            "`anomaly.std.threshold_px` = 1.0 px. Signals and the pitch residual scale with "
             "the focal length, so a pixel threshold holds for one resolution only. The F-score "
             "weighs misses and false alarms equally on a set with as many backgrounds as "
             "positives; a product that must keep false alarms rare (about one per minute, "

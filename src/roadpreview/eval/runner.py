@@ -27,7 +27,7 @@ import os
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from functools import cache
 from multiprocessing import get_context
 from pathlib import Path
@@ -37,9 +37,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from roadpreview import __version__
+from roadpreview.anomaly.base import TrajectorySample
 from roadpreview.configtools import to_mapping
 from roadpreview.errors import InputDataError, OperationError
 from roadpreview.eval.methods import REFERENCE_METHOD, MethodSpec, NanStdFallback, method_config
+from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.sim.scenario import ScenarioConfig
 
@@ -48,10 +50,11 @@ log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
 
 #: bump when the trace layout or the way traces are produced changes
-TRACE_FORMAT = 2
+TRACE_FORMAT = 4
 _PACKAGE = Path(__file__).resolve().parents[1]
-#: sub-packages whose source does not change what a pipeline computes from a recording
-_NOT_PIPELINE = ("eval", "cli", "bench", "sim")
+#: sub-packages whose source does not change what a trace holds (the detectors run on the
+#: stored trajectory afterwards)
+_NOT_PIPELINE = ("eval", "cli", "bench", "sim", "anomaly")
 
 
 # -- digests ------------------------------------------------------------------------------------
@@ -90,9 +93,39 @@ def pipeline_source_digest() -> str:
 _NOT_RECORDING = ("sim/presets.py", "sim/dataset.py")
 
 
+#: the modules outside sim/ that a recording is written with (camera model, log and CSV
+#: writers, the sample conventions)
+_RECORDING_DEPS = ("camera.py", "canbus/imu_csv.py", "canbus/logio.py", "canbus/samples.py")
+
+
+@cache
+def _input_messages_digest() -> str:
+    """Digest of how the simulator encodes its CAN frames: the DBC's input messages and the
+    E2E protection's source. roadpreview's own output messages, and the rest of the DBC
+    module, do not change a recording."""
+    import inspect
+
+    from roadpreview.canbus import dbc
+
+    rows = [
+        (m.frame_id, m.name, m.length, [_signal_layout(s) for s in m.signals])
+        for m in dbc.load_database().messages
+        if m.frame_id not in dbc.RESERVED_OUTPUT_IDS
+    ]
+    code = [inspect.getsource(f) for f in (dbc.encode_protected, dbc.e2e_layout)]
+    return _digest([sorted(rows), code])
+
+
+def _signal_layout(sig: Any) -> tuple[Any, ...]:
+    return (sig.name, sig.start, sig.length, sig.byte_order, sig.is_signed, sig.scale, sig.offset)
+
+
 def simulator_source_digest() -> str:
-    """What a recording depends on besides its scenario: the simulator's source code."""
-    return _source_digest(("sim", "data", "camera.py", "canbus"), _NOT_RECORDING)
+    """What a recording depends on besides its scenario: the simulator's source code, the
+    modules it writes with and the DBC's input messages."""
+    return _digest(
+        [_source_digest(("sim", *_RECORDING_DEPS), _NOT_RECORDING), _input_messages_digest()]
+    )
 
 
 def scenario_digest(cfg: ScenarioConfig, sim: str | None = None) -> str:
@@ -101,37 +134,28 @@ def scenario_digest(cfg: ScenarioConfig, sim: str | None = None) -> str:
 
 
 # -- traces -------------------------------------------------------------------------------------
-#: per-frame float columns of a trace
+#: per-frame float columns of a trace: the frame's pipeline state
 FLOAT_COLUMNS = (
     "t",
     "y",
     "y_c",
     "phi",
     "phi_std",
-    "s",
-    "s_left",
-    "s_right",
-    "threshold_px",
     "lead_distance_m",
+    "y_left",
+    "y_right",
+    "heave_px",
     "box_x0",
     "box_y0",
     "box_x1",
     "box_y1",
 )
-#: per-frame integer columns (mode: `FusionMode` value; suppressed: flag bits)
-INT_COLUMNS = ("mode", "suppressed", "lead_found", "textured")
-#: per-alert columns (None -> NaN; side and mode as their enum values)
-ALERT_COLUMNS = (
-    "t_s",
-    "t_emit_s",
-    "distance_m",
-    "time_to_arrival_s",
-    "severity_px",
-    "height_mm",
-    "confidence",
-)
-#: per-event columns (all detector peaks, suppressed ones included)
-EVENT_COLUMNS = ("t_s", "t_peak_s", "t_emit_s", "s_px", "lead_distance_m", "suppressed")
+#: per-frame integer columns (mode: `FusionMode` value)
+INT_COLUMNS = ("mode", "lead_found", "textured", "target_changed")
+#: the detector's input (`TrajectorySample`) per frame, stored as ``traj_<field>`` (None ->
+#: NaN; mode as its value, valid as 0/1): every detector runs on it afterwards
+#: (`roadpreview.eval.detectors`), so the traces do not depend on the detectors
+TRAJECTORY_FIELDS = tuple(f.name for f in fields(TrajectorySample) if f.name != "t")
 
 
 @dataclass(frozen=True)
@@ -140,10 +164,9 @@ class Trace:
     (0 = the simulation's t = 0, the time base of ``truth.json`` and ``truth.npz``)."""
 
     method: str
-    columns: dict[str, NDArray[Any]]  #: `FLOAT_COLUMNS` + `INT_COLUMNS`, one value per frame
-    alerts: dict[str, Array]  #: `ALERT_COLUMNS` (+ ``side``, ``mode``), one value per alert
-    events: dict[str, Array]  #: `EVENT_COLUMNS`, one value per detector event
+    columns: dict[str, NDArray[Any]]  #: `FLOAT_COLUMNS` + `INT_COLUMNS` + trajectory
     seconds: float = math.nan  #: processing time of this method (its share), s
+    focal_px: float = math.nan  #: the camera's focal length (vertical), px
 
     def __getitem__(self, name: str) -> NDArray[Any]:
         return self.columns[name]
@@ -152,44 +175,28 @@ class Trace:
     def t(self) -> Array:
         return self.columns["t"]
 
-    @property
-    def s(self) -> Array:
-        return self.columns["s"]
-
     def __len__(self) -> int:
         return int(self.columns["t"].size)
 
-    def alert_list(self) -> list[Any]:
-        """The alerts as `roadpreview.anomaly.alert.Alert` objects (recording clock)."""
-        from roadpreview.anomaly.alert import Alert
-        from roadpreview.anomaly.base import Side
-        from roadpreview.fusion.mode import FusionMode
-
-        def opt(v: float) -> float | None:
-            return float(v) if math.isfinite(v) else None
-
-        a = self.alerts
-        return [
-            Alert(
-                t_s=float(a["t_s"][i]),
-                t_emit_s=float(a["t_emit_s"][i]),
-                distance_m=opt(a["distance_m"][i]),
-                time_to_arrival_s=opt(a["time_to_arrival_s"][i]),
-                severity_px=float(a["severity_px"][i]),
-                height_mm=opt(a["height_mm"][i]),
-                side=Side(int(a["side"][i])),
-                confidence=float(a["confidence"][i]),
-                mode=FusionMode(int(a["mode"][i])),
-            )
-            for i in range(a["t_s"].size)
-        ]
+    def samples(self) -> list[TrajectorySample]:
+        """The detector's input per frame, as the pipeline gave it (recording clock)."""
+        cols = [self.columns[f"traj_{f}"].tolist() for f in TRAJECTORY_FIELDS]
+        out = []
+        for t, row in zip(self.t.tolist(), zip(*cols, strict=True), strict=True):
+            kw = dict(zip(TRAJECTORY_FIELDS, row, strict=True))
+            kw["mode"] = FusionMode(int(kw["mode"]))
+            kw["valid"] = bool(kw["valid"])
+            for name in ("lead_accel_mps2", "ego_speed_mps"):
+                if not math.isfinite(kw[name]):
+                    kw[name] = None
+            out.append(TrajectorySample(t=t, **kw))
+        return out
 
     def save(self, path: Path) -> None:
         """Write the trace as .npz (atomically: a killed run leaves no half file)."""
         arrays: dict[str, NDArray[Any]] = {f"col_{k}": v for k, v in self.columns.items()}
-        arrays |= {f"alert_{k}": v for k, v in self.alerts.items()}
-        arrays |= {f"event_{k}": v for k, v in self.events.items()}
         arrays["seconds"] = np.asarray(self.seconds)
+        arrays["focal_px"] = np.asarray(self.focal_px)
         arrays["method"] = np.asarray(self.method)
         tmp = path.with_name(path.name + ".tmp.npz")
         savez: Any = np.savez_compressed  # numpy's stub types **kwds as allow_pickle
@@ -203,28 +210,23 @@ class Trace:
                 data = {k: npz[k] for k in npz.files}
         except (OSError, ValueError) as exc:
             raise InputDataError(f"{path}: not a readable trace ({exc})") from None
-
-        def part(prefix: str) -> dict[str, NDArray[Any]]:
-            return {k[len(prefix) :]: v for k, v in data.items() if k.startswith(prefix)}
-
         return cls(
             method=str(data["method"]),
-            columns=part("col_"),
-            alerts=part("alert_"),
-            events=part("event_"),
+            columns={k[4:]: v for k, v in data.items() if k.startswith("col_")},
             seconds=float(data["seconds"]),
+            focal_px=float(data["focal_px"]),
         )
 
 
 class _TraceRecorder:
     """Collects `FrameResult`s of one pipeline into a `Trace` (one append per frame)."""
 
-    def __init__(self, method: str, t0: float) -> None:
+    def __init__(self, method: str, t0: float, focal_px: float) -> None:
         self.method = method
         self.t0 = t0
-        self.rows: dict[str, list[float]] = {c: [] for c in (*FLOAT_COLUMNS, *INT_COLUMNS)}
-        self.alerts: dict[str, list[float]] = {c: [] for c in (*ALERT_COLUMNS, "side", "mode")}
-        self.events: dict[str, list[float]] = {c: [] for c in EVENT_COLUMNS}
+        self.focal_px = focal_px
+        names = (*FLOAT_COLUMNS, *INT_COLUMNS, *(f"traj_{f}" for f in TRAJECTORY_FIELDS))
+        self.rows: dict[str, list[float]] = {c: [] for c in names}
         self.seconds = 0.0
 
     def add(self, r: Any) -> None:
@@ -235,42 +237,19 @@ class _TraceRecorder:
         box = r.lead_box if r.lead_box is not None else (math.nan,) * 4
         for c, v in zip(FLOAT_COLUMNS[-4:], box, strict=True):
             rows[c].append(float(v))
-        rows["mode"].append(int(r.mode))
-        rows["suppressed"].append(int(r.suppressed))
-        rows["lead_found"].append(int(r.lead_found))
-        rows["textured"].append(int(r.textured))
-        self.add_alerts(r.alerts)
-        for e in r.events:
-            self.events["t_s"].append(e.t_s - self.t0)
-            self.events["t_peak_s"].append(e.t_peak_s - self.t0)
-            self.events["t_emit_s"].append(e.t_emit_s - self.t0)
-            self.events["s_px"].append(e.s_px)
-            self.events["lead_distance_m"].append(e.lead_distance_m)
-            self.events["suppressed"].append(int(e.suppressed))
-
-    def add_alerts(self, alerts: Iterable[Any]) -> None:
-        for a in alerts:
-            for c in ALERT_COLUMNS:
-                v = getattr(a, c)
-                v = math.nan if v is None else float(v)
-                if c in ("t_s", "t_emit_s"):
-                    v -= self.t0
-                self.alerts[c].append(v)
-            self.alerts["side"].append(int(a.side))
-            self.alerts["mode"].append(int(a.mode))
+        for c in INT_COLUMNS:
+            rows[c].append(int(getattr(r, c)))
+        sample = r.sample
+        for f in TRAJECTORY_FIELDS:
+            v = math.nan if sample is None else getattr(sample, f)
+            rows[f"traj_{f}"].append(math.nan if v is None else float(v))
 
     def trace(self) -> Trace:
         cols: dict[str, NDArray[Any]] = {
-            c: np.asarray(self.rows[c], dtype=np.float64) for c in FLOAT_COLUMNS
+            c: np.asarray(v, dtype=np.int64 if c in INT_COLUMNS else np.float64)
+            for c, v in self.rows.items()
         }
-        cols |= {c: np.asarray(self.rows[c], dtype=np.int64) for c in INT_COLUMNS}
-        return Trace(
-            method=self.method,
-            columns=cols,
-            alerts={k: np.asarray(v, dtype=np.float64) for k, v in self.alerts.items()},
-            events={k: np.asarray(v, dtype=np.float64) for k, v in self.events.items()},
-            seconds=self.seconds,
-        )
+        return Trace(self.method, cols, self.seconds, self.focal_px)
 
 
 # -- recordings ---------------------------------------------------------------------------------
@@ -395,12 +374,22 @@ def trace_keys(methods: MethodSet, job: RecordingJob) -> dict[str, str]:
         "version": __version__,
         "source": methods.source,
         "scenario": job.digest,
-        "reference": to_mapping(methods.configs[methods.reference]),
+        "reference": _trajectory_settings(methods.configs[methods.reference]),
     }
     return {
-        m: _digest({**common, "method": to_mapping(cfg), "nan_std": methods.nan_std.get(m)})
+        m: _digest(
+            {**common, "method": _trajectory_settings(cfg), "nan_std": methods.nan_std.get(m)}
+        )
         for m, cfg in methods.configs.items()
     }
+
+
+def _trajectory_settings(cfg: PipelineConfig) -> dict[str, Any]:
+    """The settings a trace depends on: all but the detectors' (``[anomaly]``), which run on
+    the stored trajectory afterwards."""
+    out = to_mapping(cfg)
+    out.pop("anomaly", None)
+    return out
 
 
 def trace_path(job: RecordingJob, method: str, key: str) -> Path:
@@ -421,7 +410,7 @@ def run_methods(folder: Path, methods: MethodSet) -> dict[str, Trace]:
     for m, std in methods.nan_std.items():
         pipes[m].pitch = NanStdFallback(pipes[m].pitch, std)
     ref = pipes[reference]
-    recorders = {m: _TraceRecorder(m, start) for m in order}
+    recorders = {m: _TraceRecorder(m, start, inputs.camera.fy) for m in order}
     video = VideoSource(inputs.video, start_s=start, frames_csv=inputs.frames_csv)
     if video.size != inputs.camera.size:
         raise InputDataError(
@@ -453,8 +442,6 @@ def run_methods(folder: Path, methods: MethodSet) -> dict[str, Trace]:
             rec.add(r)
     if not recorders[reference].rows["t"]:
         raise InputDataError(f"{inputs.video}: no frame could be read")
-    for m, p in pipes.items():
-        recorders[m].add_alerts(p.finish())
     for rec in recorders.values():  # the shared vision step, split evenly
         rec.seconds += vision_s / len(recorders)
     return {m: recorders[m].trace() for m in order}

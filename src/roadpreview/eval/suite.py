@@ -170,7 +170,7 @@ def run_evaluation(
         res["e2"] = ex.e2_ego_bump(data, fig_dir)
     if "e3" in exps and thresholds is not None:
         res["e3"] = ex.e3_fpr_vs_rotation(
-            data, fig_dir, thresholds, base.anomaly.detector.threshold_px
+            data, fig_dir, thresholds, base.anomaly.std.threshold_px
         )
     if "e5" in exps and thresholds is not None:
         res["e5"] = {
@@ -178,6 +178,10 @@ def run_evaluation(
             "range": ex.e5_range(data, fig_dir),
             "lead_time": ex.e5_lead_time(data, fig_dir),
         }
+    if "e6" in exps:
+        from roadpreview.eval.product import e6_product
+
+        res["e6"] = e6_product(data, fig_dir)
     exp_s = time.perf_counter() - t_exp
 
     frames_gen = sum(o.frames for o in outcomes if o.generate_s > 0)
@@ -220,7 +224,8 @@ def run_evaluation(
             }
             for m in mset.configs
         },
-        "detector": to_mapping(base.anomaly.detector),
+        "detector": to_mapping(base.anomaly.std),
+        "anomaly": to_mapping(base.anomaly),
         "alert": to_mapping(base.anomaly.alert),
         "vision": to_mapping(base.vision),
         "heave_settings": to_mapping(base.heave) if hasattr(base, "heave") else None,

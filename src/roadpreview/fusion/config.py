@@ -166,6 +166,16 @@ class ModeConfig:
         help="consecutive failed frames before vision is declared lost (a single bad frame"
         " is bridged by the gyro without a switch)",
     )
+    loss_time_s: float = param(
+        0.3,
+        unit="s",
+        ge=0.0,
+        le=10.0,
+        help="and those failures must span this long since the last good frame (9 frames at"
+        " 30 Hz): on rough roads the fit fails on single frames (wheel hop, blur) while the"
+        " frames between still measure; leaving FUSED for each made the mode flap 40-90"
+        " times a minute on class D/E roads. A validating vision survives gaps this short",
+    )
     vision_timeout_s: float = param(
         0.25,
         unit="s",

@@ -73,8 +73,8 @@ class ModeSupervisor:
         if not consistent:
             self.trust = _LOST
             return False
-        self.last_good_t = t
-        if self.trust is _LOST:
+        previous, self.last_good_t = self.last_good_t, t
+        if self.trust is _LOST or t - previous > self.cfg.loss_time_s:
             self.trust = _VALIDATING
             self.validating_since = t
         if t - self.validating_since >= self.cfg.revalidation_s - 1e-9:
@@ -85,10 +85,24 @@ class ModeSupervisor:
         return False
 
     def bad_frame(self, t: float) -> None:
-        """A frame where vision failed (no texture, poor fit) or gave nonsense."""
+        """A frame where vision failed (no texture, poor fit) or gave nonsense.
+
+        Trusted vision is lost after ``loss_frames`` failed frames in a row that also span
+        ``loss_time_s`` since the last good one: on a rough road a fit that fails every
+        other frame still gives the filter a measurement every few frames, and the gyro
+        bridges the rest. A validating vision keeps validating through such gaps; only a
+        longer one (or a frame that disagrees with the gyro) sends it back to LOST.
+        """
         self.bad_frames += 1
-        validating = self.trust is _VALIDATING
-        if validating or (self.trust is _TRUSTED and self.bad_frames >= self.cfg.loss_frames):
+        gap = t - self.last_good_t
+        if self.trust is _VALIDATING:
+            if gap > self.cfg.loss_time_s:
+                self.trust = _LOST
+        elif (
+            self.trust is _TRUSTED
+            and self.bad_frames >= self.cfg.loss_frames
+            and gap >= self.cfg.loss_time_s - 1e-9
+        ):
             self.trust = _LOST
 
     def no_news(self, t: float) -> None:

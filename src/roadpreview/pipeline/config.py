@@ -16,6 +16,7 @@ from typing import Any
 from roadpreview import configtools
 from roadpreview.anomaly.config import AnomalyConfig
 from roadpreview.configtools import param
+from roadpreview.ego.vertical import EgoVerticalConfig
 from roadpreview.fusion.heave import HeaveConfig
 from roadpreview.vision.frontend import VisionConfig
 
@@ -136,6 +137,7 @@ class PipelineConfig:
     pitch: PitchStageConfig = field(default_factory=PitchStageConfig)
     fusion: FusionStageConfig = field(default_factory=FusionStageConfig)
     heave: HeaveConfig = field(default_factory=HeaveConfig)
+    ego: EgoVerticalConfig = field(default_factory=EgoVerticalConfig)
     anomaly: AnomalyConfig = field(default_factory=AnomalyConfig)
     can: CanStageConfig = field(default_factory=CanStageConfig)
     lead: LeadKinematicsConfig = field(default_factory=LeadKinematicsConfig)

@@ -26,15 +26,18 @@ from typing import Any
 import can
 import numpy as np
 
-from roadpreview.anomaly import AlertBuilder, TrajectorySample, WindowedStdDetector
+from roadpreview.anomaly import AlertBuilder, TrajectorySample, make_detector
 from roadpreview.anomaly.alert import Alert
 from roadpreview.anomaly.base import AnomalyEvent, SuppressionReason
+from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult, EgoConfirmer
+from roadpreview.anomaly.roughness import RoadRoughness, RoadState
 from roadpreview.camera import CameraModel
 from roadpreview.canbus import load_database
 from roadpreview.canbus.decode import CanInputDecoder
 from roadpreview.canbus.mapping import load_mapping
 from roadpreview.canbus.output import Status
 from roadpreview.canbus.samples import ImuSample, SpeedSample
+from roadpreview.ego.vertical import EgoVerticalMonitor
 from roadpreview.fusion import FusedPitch, VisualPitch, compensation, make_fusion
 from roadpreview.fusion.heave import HeaveObserver, HeaveTerm
 from roadpreview.fusion.mode import FusionMode
@@ -83,8 +86,22 @@ class FrameResult:
     #: when it resumed (Δz_on), so it never jumps; held constant while the heave or the
     #: lead distance is unknown; 0 before the first and after a target change
     heave_px: float = 0.0
+    #: the detector's statistic, its threshold and the time it describes (``DetectorFrame``)
+    score: float = math.nan
+    score_threshold: float = math.nan
+    score_t: float = math.nan
+    #: the detector's fitted road input at this frame and its background, m (NaN: none)
+    road_input_m: float = math.nan
+    background_m: float = math.nan
+    #: the ego's band-passed vertical acceleration peak over the frame interval, m/s²
+    ego_accel_peak_mps2: float = math.nan
+    road: RoadState = field(default_factory=RoadState)  #: the road's roughness class estimate
+    #: what the detector was given at this frame (None: not run)
+    sample: TrajectorySample | None = None
     events: tuple[AnomalyEvent, ...] = ()
     alerts: tuple[Alert, ...] = ()
+    #: alerts whose spot the ego passed at this frame, with what it felt there
+    confirmations: tuple[ConfirmationResult, ...] = ()
 
     #: columns of the per-frame table, in order
     COLUMNS = (
@@ -112,6 +129,13 @@ class FrameResult:
         "n_events",
         "heave_m",
         "heave_px",
+        "score",
+        "score_threshold",
+        "score_t",
+        "road_input_mm",
+        "background_mm",
+        "ego_accel_peak_mps2",
+        "road_class",
     )
 
     def row(self) -> list[Any]:
@@ -141,6 +165,13 @@ class FrameResult:
             len(self.events),
             self.heave_m,
             self.heave_px,
+            self.score,
+            self.score_threshold,
+            self.score_t,
+            1e3 * self.road_input_m,
+            1e3 * self.background_m,
+            self.ego_accel_peak_mps2,
+            self.road.iso_class or "",
         ]
 
 
@@ -204,17 +235,20 @@ class Pipeline:
         self.vision = VisionFrontEnd(camera, cfg.vision)
         self.pitch = make_estimator(cfg.pitch.estimator, camera, **cfg.pitch.options)
         self.fusion = make_fusion(cfg.fusion.backend, **cfg.fusion.options)
-        det_cfg = cfg.anomaly.detector
-        if det_cfg.signal.focal_px is None:
-            det_cfg = replace(det_cfg, signal=replace(det_cfg.signal, focal_px=camera.fy))
-        self.detector = WindowedStdDetector(det_cfg)
-        self.alert_builder = AlertBuilder(cfg.anomaly.alert, signal=det_cfg.signal)
+        self.detector = make_detector(cfg.anomaly, camera.fy)
+        signal = cfg.anomaly.std.signal
+        if signal.focal_px is None:
+            signal = replace(signal, focal_px=camera.fy)
+        self.alert_builder = AlertBuilder(cfg.anomaly.alert, signal=signal)
         db = load_database(cfg.can.dbc or None, strict=not cfg.can.dbc)
         self.can_decoder = CanInputDecoder(
             db, load_mapping(cfg.can.mapping), db_name=cfg.can.dbc or "roadpreview.dbc"
         )
         for quantity, why in self.can_decoder.missing.items():
             log.warning("CAN input: %s is not available (%s)", quantity, why)
+        self.ego_vertical = EgoVerticalMonitor(cfg.ego)
+        self.roughness = RoadRoughness(cfg.anomaly.roughness, cfg.anomaly.two_axle.vehicle)
+        self.confirmer = EgoConfirmer(cfg.anomaly.confirm)
         self._lead = _LeadKinematics(cfg.lead.window_s)
         on = cfg.heave.enabled
         self.heave = HeaveObserver(cfg.heave) if on else None
@@ -242,6 +276,7 @@ class Pipeline:
     def push_imu(self, sample: ImuSample) -> None:
         if self.heave is not None:
             self.heave.push(sample)
+        self.ego_vertical.push(sample.t_s, sample.accel_m_s2[2])
         roll, pitch, yaw = sample.rates_rad_s
         if math.isfinite(pitch):
             self.fusion.push_gyro(
@@ -315,6 +350,7 @@ class Pipeline:
         if lead.target_changed:
             self._lead.reset()
         lead_accel = self._lead.push(t, lead.distance_m, self._speed.accel)
+        ego_v = self.ego_vertical.take()
         sample = TrajectorySample(
             t=t,
             y_c=y_c,
@@ -327,11 +363,27 @@ class Pipeline:
             ego_speed_mps=ego_speed,
             valid=bool(lead) and math.isfinite(y_c),
             compensation_px=f * math.tan(phi) + heave_px,
+            focal_px=f,
+            ego_accel_rms_mps2=ego_v.rms_mps2,
+            ego_accel_peak_mps2=ego_v.peak_mps2,
         )
         events = self.detector.restart() if lead.target_changed else []
         events += self.detector.push(sample)
         alerts = tuple(a for a in (self.alert_builder.build(e) for e in events) if a is not None)
         self.alerts_sent += len(alerts)
+        road = self.roughness.push(
+            t,
+            ego_speed_mps=ego_speed,
+            ego_accel_rms_mps2=ego_v.rms_mps2,
+            ego_accel_samples=ego_v.n_samples,
+            lead_y_c_px=y_c,
+            lead_distance_m=lead.distance_m,
+            focal_px=f,
+            lead_valid=sample.valid,
+        )
+        for a in alerts:
+            self.confirmer.add(a.alert_id, a.t_s, a.distance_m, a.side)
+        confirmations = tuple(self.confirmer.push(t, ego_speed, ego_v.peak_mps2))
         df = self.detector.frame
         nan = math.nan
         result = FrameResult(
@@ -364,8 +416,17 @@ class Pipeline:
             ego_speed_mps=ego_speed,
             heave_m=heave_m,
             heave_px=heave_px,
+            score=df.score if df else nan,
+            score_threshold=df.threshold if df else nan,
+            score_t=df.t_score if df else nan,
+            road_input_m=df.height_m if df else nan,
+            background_m=df.background_m if df else nan,
+            ego_accel_peak_mps2=ego_v.peak_mps2,
+            road=road,
+            sample=sample,
             events=tuple(events),
             alerts=alerts,
+            confirmations=confirmations,
         )
         self.frames += 1
         self.last = result
@@ -420,4 +481,8 @@ class Pipeline:
             alerts_sent=self.alerts_sent,
             input_errors_total=self.can_decoder.stats.skipped,
             frames_processed=self.frames,
+            road=r.road,
+            precision=self.confirmer.precision() if self.confirmer.resolved else None,
+            confirmed=self.confirmer.counts[Confirmation.CONFIRMED],
+            not_felt=self.confirmer.counts[Confirmation.NOT_FELT],
         )

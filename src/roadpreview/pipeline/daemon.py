@@ -376,7 +376,7 @@ class Daemon:
                 self.output_bus = open_bus(
                     c.output_interface or c.input_interface, c.output_channel or c.input_channel
                 )
-            self.output = CanOutput(self.output_bus)
+            self.output = CanOutput(self.output_bus, detector=self.config.anomaly.detector)
             self.alerts_log: can.Listener | None = None
             if self.options.alerts_log is not None:
                 self.alerts_log = can.Logger(str(self.options.alerts_log))
@@ -491,7 +491,9 @@ class Daemon:
         self._track_mode(r)
         self._send_alerts(r.alerts)
         self._imu_watchdog(t)
-        self.output.update_status(self._status())
+        status = self._status()
+        self._send_confirmations(r, status)
+        self.output.update_status(status)
         if real:
             self.summary.frame_ms.add((time.perf_counter() - t0) * 1e3)
 
@@ -537,10 +539,33 @@ class Daemon:
                 )
             )
             try:
-                msg = self.output.send_alert(a)
+                msgs = self.output.send_alert(a)  # RP_ALERT, RP_ALERT_DETAIL
             except OperationError as exc:
                 self.summary.alert_send_errors += 1
                 log.error(kv("alert_send_failed", error=str(exc)))
+                continue
+            if self.alerts_log is not None:
+                for msg in msgs:
+                    self.alerts_log.on_message_received(msg)
+
+    def _send_confirmations(self, r: FrameResult, status: Status) -> None:
+        """RP_CONFIRM for each alert whose spot the ego passed at frame ``r`` (the running
+        precision from ``status``, the pipeline's after this frame)."""
+        for c in r.confirmations:
+            log.info(
+                kv(
+                    "confirmation",
+                    t=r.t,
+                    alert_id=c.alert_id,
+                    outcome=c.outcome.name,
+                    peak_mps2=c.peak_mps2,
+                    background_mps2=c.background_mps2,
+                )
+            )
+            try:
+                msg = self.output.send_confirmation(c, status.precision, timestamp=r.t)
+            except OperationError as exc:
+                log.error(kv("confirmation_send_failed", error=str(exc)))
                 continue
             if self.alerts_log is not None:
                 self.alerts_log.on_message_received(msg)
@@ -574,7 +599,9 @@ class Daemon:
             s.can_receive_errors = self.receiver.listener.errors
         self.output.stop()
         try:  # the last word: the counts after the flush
-            self.output.send_status(self._status(), timestamp=time.time())
+            status, now = self._status(), time.time()
+            self.output.send_status(status, timestamp=now)
+            self.output.send_road_status(status, timestamp=now)
         except OperationError as exc:
             log.error(kv("status_send_failed", error=str(exc)))
         if self.receiver is not None:

@@ -16,8 +16,17 @@ import cv2
 import numpy as np
 
 from roadpreview.anomaly.alert import Alert
+from roadpreview.anomaly.confirm import ConfirmationResult
 from roadpreview.canbus import write_can_log
-from roadpreview.canbus.output import AlertEncoder, Status, StatusEncoder
+from roadpreview.canbus.output import (
+    AlertDetailEncoder,
+    AlertEncoder,
+    ConfirmEncoder,
+    RoadStatusEncoder,
+    Status,
+    StatusEncoder,
+    detector_code,
+)
 from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.core import FrameResult
 
@@ -49,21 +58,41 @@ class FrameTableWriter:
 
 
 class CanOutputLog:
-    """RP_ALERT frames as they are emitted and RP_STATUS every ``period_s``, kept in
-    memory (a few frames per second) and written to a log at the end."""
+    """The CAN outputs of a run, kept in memory (a few frames per second) and written to a
+    log at the end: per alert RP_ALERT then RP_ALERT_DETAIL as it is emitted, per
+    confirmation RP_CONFIRM at its frame, and RP_STATUS + RP_ROAD_STATUS every
+    ``period_s``. ``detector`` (``anomaly.detector``) goes into RP_ALERT_DETAIL."""
 
-    def __init__(self, period_s: float = 0.1) -> None:
+    def __init__(self, period_s: float = 0.1, *, detector: str = "two-axle") -> None:
+        detector_code(detector)  # an unknown name fails here, not at the first alert
         self.period_s = period_s
+        self.detector = detector
         self._alerts = AlertEncoder()
+        self._details = AlertDetailEncoder()
+        self._confirms = ConfirmEncoder()
         self._status = StatusEncoder()
+        self._road = RoadStatusEncoder()
         self.messages: list[can.Message] = []
         self._next_status = -math.inf
 
-    def frame(self, t: float, status: Status, alerts: Sequence[Alert]) -> None:
+    def frame(
+        self,
+        t: float,
+        status: Status,
+        alerts: Sequence[Alert],
+        confirmations: Sequence[ConfirmationResult] = (),
+    ) -> None:
+        """One frame at ``t``: its alerts and confirmations (``FrameResult.alerts`` /
+        ``.confirmations``) and the status after it (``Pipeline.status()``; its precision
+        goes into each RP_CONFIRM)."""
         for a in alerts:
             self.messages.append(self._alerts.encode(a, timestamp=t))
+            self.messages.append(self._details.encode(a, self.detector, timestamp=t))
+        for c in confirmations:
+            self.messages.append(self._confirms.encode(c, status.precision, timestamp=t))
         if t >= self._next_status:
             self.messages.append(self._status.encode(status, timestamp=t))
+            self.messages.append(self._road.encode(status, timestamp=t))
             self._next_status = t + self.period_s
 
     def write(self, path: Path) -> int:

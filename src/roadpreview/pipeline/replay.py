@@ -132,7 +132,7 @@ def replay(
     out_dir = Path(out) if out is not None else None
     table = None
     annot = None
-    can_out = CanOutputLog(config.can.status_period_s)
+    can_out = CanOutputLog(config.can.status_period_s, detector=config.anomaly.detector)
     series = SeriesRecorder()
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -162,7 +162,7 @@ def replay(
             if not modes or modes[-1][1] != r.mode:
                 modes.append((t, r.mode, r.pitch_reason or r.vision_reason))
             alerts.extend(r.alerts)
-            can_out.frame(t, pipeline.status(), r.alerts)
+            can_out.frame(t, pipeline.status(), r.alerts, r.confirmations)
             series.add(r)
             if table is not None:
                 table.write(r)

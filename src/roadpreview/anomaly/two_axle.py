@@ -1,0 +1,994 @@
+"""The product's detector: a two-axle matched filter on the lead's road input, prewhitened
+against the road's own background (GLRT), normalised by that background (CFAR), on a heave
+and a roll channel.
+
+Per camera frame (``docs/detector.md``, "The two-axle detector"):
+
+1. **Channels.** Heave: the whole lead's compensated image row y_c. Roll: the
+   difference of its halves y_c,L - y_c,R, in which the ego's pitch and heave
+   (the same for both halves) cancel. Both in pixels, on the regular frame grid
+   (dropped frames and short invalid stretches interpolated, and so are the
+   frames around the ego's own jolts: the compensation misses part of those).
+2. **Hypothesis.** The lead's front axle met an anomaly of duration D (length /
+   speed) at t_k; its rear axle meets it τ = wheelbase / v_lead later, with
+   v_lead the ego's speed plus the range rate. The rear face then moves by h
+   times the nominal car's two-axle response (`roadpreview.anomaly.response`),
+   i.e. y moves by -f/d times that. One hypothesis per duration of the bank,
+   each ending at this frame: t_k = t - τ - D - ``post_s``.
+3. **Prewhitening.** Each channel is differenced and passed through the
+   prediction-error filter of an AR(4) model fitted to its background (the
+   lead's own bouncing on this road, the tracking noise, the compensation's
+   residual: `_Whitener`); the templates go through the same filters.
+4. **Fit.** Least squares of the whitened channel on the whitened template plus a
+   constant over [t_k - ``pre_s``, t]: the amplitude is the road input ĥ in
+   metres (bump +, pothole -), its white-noise std the innovations' std over the
+   template's whitened energy.
+5. **Background (CFAR).** The amplitudes in units of that std have a running
+   median over the last ``background_s`` (and the last ``background_short_s``,
+   if higher) of frames away from events: the background's departure from the
+   whitening model. The score is z = |ĥ| / (white-noise std x that level),
+   widened for the compensation's share on the heave channel and for the
+   heave's leak into the roll channel, floored by the tracking noise.
+6. **Event.** z >= ``threshold_z`` and |ĥ| >= ``min_height_mm`` (a margin over
+   the road's background and a floor in millimetres of road: independent of the
+   camera's resolution, focal length and frame rate) opens an excursion; its
+   best frame within ``peak_window_s`` describes it, and it is sent then.
+   `_refine` settles its crossing time, height and sign on the frames seen
+   since, every duration and alignment within ``refine_search_s`` on one
+   common window. Side: BOTH when the roll channel's amplitude is less than
+   ``one_sided_ratio`` times the heave channel's, else LEFT / RIGHT from the
+   signs. Length: v_lead x D where D is resolved.
+
+No fit while the lead is nearer than ``min_distance_m`` or its distance jumps
+within the window (the tracker holds something else), nor while the lead
+stands still; no score while the background is being learnt. The suppression
+rules (lead braking, DEGRADED, unsettled IMU_ONLY) are the windowed-std
+detector's (`SuppressionTracker`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg, signal
+
+from roadpreview.anomaly.base import (
+    AnomalyEvent,
+    DetectorFrame,
+    Side,
+    SuppressionReason,
+    TrajectorySample,
+)
+from roadpreview.anomaly.config import TwoAxleConfig
+from roadpreview.anomaly.response import TemplateBank
+from roadpreview.anomaly.suppression import SuppressionTracker
+from roadpreview.configtools import check_ranges
+from roadpreview.errors import InputDataError
+from roadpreview.fusion.mode import FusionMode
+
+FloatArray = NDArray[np.float64]
+
+#: median |x| / this = std of a Gaussian x (the MAD consistency constant)
+_MAD_TO_STD = 0.6745
+
+# columns of the sample ring buffer
+_T, _Y, _YD, _COMP, _D, _V, _MODE, _DSTD, _JOLT = range(9)
+_NCOL = 9
+# channels of the fit: heave (whole lead), roll (left - right), the compensation applied
+_HEAVE, _ROLL, _COMPENSATION = range(3)
+
+
+class _Ring:
+    """The last ``capacity`` rows, readable as one contiguous slice (each row is written
+    twice, at i and i + capacity)."""
+
+    def __init__(self, capacity: int, columns: int) -> None:
+        self.capacity = capacity
+        self.data = np.full((2 * capacity, columns), np.nan)
+        self.n = 0  # rows written so far
+
+    def clear(self) -> None:
+        self.data.fill(np.nan)
+        self.n = 0
+
+    def push(self, row: FloatArray) -> None:
+        i = self.n % self.capacity
+        self.data[i] = row
+        self.data[i + self.capacity] = row
+        self.n += 1
+
+    def last(self, m: int) -> FloatArray:
+        """The newest ``m`` rows (fewer if fewer were written), oldest first."""
+        m = min(m, self.n, self.capacity)
+        end = (self.n - 1) % self.capacity + self.capacity + 1
+        return self.data[end - m : end]
+
+
+class _Background:
+    """Running level of the fitted amplitudes: per channel and duration, the median of |ĥ|
+    over the frames of the last ``span_s`` (anomalies take a few per cent of them: the
+    median does not see them), or over the last ``short_s`` when that is higher (the level
+    rises within seconds when the road or the tracking gets worse, and falls slowly).
+    Rows live in a numpy ring; the medians are recomputed every ``refresh`` pushes."""
+
+    def __init__(
+        self, span_s: float, short_s: float, shape: tuple[int, int], refresh: int, capacity: int
+    ) -> None:
+        self.span_s = span_s
+        self.short_s = short_s
+        self.shape = shape
+        self.refresh = refresh
+        self._t = np.full(capacity, -np.inf)
+        self._rows = np.full((capacity, shape[0] * shape[1]), np.nan)
+        self._n = 0
+        self._first_t = math.nan
+        self._last_t = math.nan
+        self._level = np.full(shape, np.inf)  # inf: no background yet
+
+    @property
+    def seconds(self) -> float:
+        """Time span of the frames held."""
+        if self._n < 2:
+            return 0.0
+        return min(self._last_t - self._first_t, self.span_s)
+
+    @property
+    def pushes(self) -> int:
+        """Frames pushed so far."""
+        return self._n
+
+    def push(self, t: float, abs_amplitude: FloatArray) -> None:
+        i = self._n % self._t.size
+        self._t[i] = t
+        self._rows[i] = abs_amplitude.ravel()
+        if self._n == 0:
+            self._first_t = t
+        self._last_t = t
+        self._n += 1
+        if self._n % self.refresh == 0 or self._n == 2:
+            self._update(t)
+
+    def _update(self, t: float) -> None:
+        recent = self._t >= t - self.span_s
+        short = self._t >= t - self.short_s
+        level = np.fmax(_nan_median(self._rows[recent]), _nan_median(self._rows[short]))
+        level = level.reshape(self.shape) / _MAD_TO_STD
+        self._level = np.where(np.isfinite(level), level, np.inf)
+
+    def level(self) -> FloatArray:
+        """1-std-equivalent background (channel, duration), m (inf: none)."""
+        return self._level
+
+
+def _nan_median(x: FloatArray) -> FloatArray:
+    """Median of each column over its finite values (NaN: none), one sort for all."""
+    n = np.count_nonzero(np.isfinite(x), axis=0)
+    srt = np.sort(x, axis=0)  # NaN sorts last
+    cols = np.arange(x.shape[1])
+    lo = np.maximum((n - 1) // 2, 0)
+    hi = np.maximum(n // 2, 0)
+    out = 0.5 * (srt[lo, cols] + srt[hi, cols])
+    out[n == 0] = np.nan
+    return np.asarray(out)
+
+
+@dataclass(frozen=True)
+class TwoAxleRun:
+    """A whole trajectory through the detector: per-frame arrays and all events."""
+
+    t: FloatArray  #: frame times, s
+    score: FloatArray  #: z per frame (NaN while undefined)
+    t_score: FloatArray  #: the crossing time each score hypothesises, s
+    height_m: FloatArray  #: the best fit's road input, m
+    background_m: FloatArray  #: its background, m
+    suppressed: NDArray[np.int64]
+    events: list[AnomalyEvent]
+
+    @property
+    def alerts(self) -> list[AnomalyEvent]:
+        return [e for e in self.events if not e.suppressed]
+
+
+#: order of the prewhitening AR model (at 25-60 fps the body bounce, the tracking noise and
+#: the compensation residual need about four poles; 2 underfits a class D road)
+_AR_ORDER = 4
+#: the two-axle lag is rounded to this for the template cache, s (3 % of a 0.17 s lag at
+#: 60 km/h: well inside the bank's duration steps)
+_TAU_STEP_S = 0.005
+#: templates cached for this many (lag, frame interval) pairs
+_MAX_GRIDS = 64
+#: the background ring holds ``background_s`` at up to this frame rate, Hz
+_MAX_FPS = 120.0
+#: the frame interval is re-measured every this many frames
+_REMEASURE_FRAMES = 30
+#: the range rate (a slope over a second) is re-fitted every this many frames
+_RANGE_RATE_EVERY = 5
+
+
+@dataclass(frozen=True, eq=False)
+class _Grid:
+    """The templates on a regular frame grid ending now: raw (with `_AR_ORDER` + 1 frames
+    of history in front, for the filters), each duration's window, and the energy an
+    unwhitened fit against a line would have (the white-noise floor)."""
+
+    key: tuple[float, float]  #: (τ, frame interval)
+    s: FloatArray  #: (J, m + p + 1)
+    inside: FloatArray  #: (J, m) 1 inside each duration's window, 0 outside
+    ss_raw: FloatArray  #: (J,)
+    n: FloatArray  #: (J,) frames in each window
+
+
+class _Whitener:
+    """A channel's prediction-error filter: first differences (a line becomes a constant,
+    slow drift goes), then the AR(p) filter A(z) fitted to the background's differences by
+    Yule-Walker, so that the road's own bouncing, the tracking noise and the compensation's
+    residual come out white and the fit is the GLRT against the background's spectrum.
+    A(z) = 1 until the first background has been seen."""
+
+    def __init__(self, channel: int, order: int) -> None:
+        self.channel = channel
+        self.order = order
+        self.a = np.array([1.0])
+        self.version = 0
+
+    def fit(self, dx: FloatArray) -> None:
+        """Fit A(z) to the differenced background samples ``dx`` (finite)."""
+        p = self.order
+        if dx.size < 10 * p:
+            return
+        dx = dx - dx.mean()
+        r = np.array([np.dot(dx[k:], dx[: dx.size - k]) for k in range(p + 1)]) / dx.size
+        if not r[0] > 0:
+            return
+        try:
+            coef = linalg.solve_toeplitz(r[:p], r[1 : p + 1])
+        except (np.linalg.LinAlgError, ValueError):
+            return
+        if np.all(np.isfinite(coef)):
+            self.a = np.concatenate([[1.0], -coef])
+            self.version += 1
+
+    @property
+    def white_gain(self) -> float:
+        """Std of the output for white input of unit std (differences, then A(z))."""
+        return float(np.sqrt(np.sum(np.convolve(self.a, [1.0, -1.0]) ** 2)))
+
+    def apply(self, x: FloatArray) -> FloatArray:
+        """Differences of ``x`` along its last axis through A(z), without the first p + 1
+        samples (the filters' start-up): ``x.shape[-1] - p - 1`` values."""
+        dx = np.diff(x, axis=-1)
+        y = signal.lfilter(self.a, [1.0], dx, axis=-1)
+        return np.asarray(y[..., self.order :])
+
+
+class _ExcursionPicker:
+    """One event per excursion above the threshold, at a fixed delay: the first eligible
+    frame opens it, the best score within ``window_s`` describes it, and it is confirmed
+    ``window_s`` after it opened (a bounded latency: `TwoAxleDetector._refine` then
+    settles its alignment on the frames seen since)."""
+
+    def __init__(self, window_s: float) -> None:
+        self.window_s = window_s
+        self._cand: tuple[float, float, tuple[AnomalyEvent, _Hypothesis]] | None = None
+
+    def due(self, t: float) -> list[tuple[AnomalyEvent, _Hypothesis]]:
+        """The excursion confirmed at ``t`` (its window has passed), if any."""
+        if self._cand is not None and t - self._cand[0] >= self.window_s - 1e-9:
+            out = [self._cand[2]]
+            self._cand = None
+            return out
+        return []
+
+    def offer(
+        self, t: float, value: float, describe: Callable[[], tuple[AnomalyEvent, _Hypothesis]]
+    ) -> None:
+        """A frame's score (-inf: not eligible): opens an excursion or may improve it."""
+        if math.isfinite(value):
+            if self._cand is None:
+                self._cand = (t, value, describe())
+            elif value > self._cand[1]:
+                self._cand = (self._cand[0], value, describe())
+
+    def flush(self) -> list[tuple[AnomalyEvent, _Hypothesis]]:
+        if self._cand is None:
+            return []
+        out = [self._cand[2]]
+        self._cand = None
+        return out
+
+
+@dataclass(frozen=True)
+class _Hypothesis:
+    """What a candidate event was fitted with, for refining it when it is confirmed."""
+
+    center_s: float  #: centre of the anomaly's pulse under the front axle, s
+    tau_s: float  #: the two-axle lag, s (NaN: unknown)
+    channel: int  #: _HEAVE or _ROLL
+    noise_m: float  #: the background std of the amplitude, m (NaN: not metric)
+    focal_px: float
+
+
+@dataclass
+class _Fit:
+    """The fits of one frame: per channel and duration."""
+
+    amplitude: FloatArray  #: (3, J) road input, m (px per template unit without focal/d)
+    sigma_fit: FloatArray  #: (J,) white-noise std of the amplitude for 1 px of noise, m
+    t_cross: FloatArray  #: (J,) hypothesised front-axle crossing times, s
+    valid_fraction: FloatArray  #: (J,) share of valid frames in each window
+    n_valid: FloatArray  #: (J,) valid frames in each window
+    metric: bool  #: amplitudes are in metres (focal and distance known)
+    #: (2, J) whitened template energies of the heave and roll channels, px² per m²: the
+    #: amplitude's std is the innovations' std / sqrt(energy)
+    energy: FloatArray = field(default_factory=lambda: np.empty((2, 0)))
+    innovation: FloatArray = field(default_factory=lambda: np.full(2, np.nan))  #: newest, px
+
+
+class TwoAxleDetector:
+    """Streaming two-axle CFAR detector (module docstring). Push in time order."""
+
+    def __init__(self, config: TwoAxleConfig | None = None) -> None:
+        self.config = config or TwoAxleConfig()
+        check_ranges(self.config, "TwoAxleConfig")
+        self.config.validate()
+        cfg = self.config
+        self.bank = TemplateBank.cached(cfg.vehicle, cfg.durations_s)
+        self._durations = np.asarray(cfg.durations_s, dtype=float)
+        self._ring = _Ring(cfg.buffer_frames, _NCOL)
+        self._background = _Background(
+            cfg.background_s,
+            cfg.background_short_s,
+            (2, len(cfg.durations_s)),
+            cfg.background_refresh_frames,
+            capacity=math.ceil(cfg.background_s * _MAX_FPS),
+        )
+        self._suppression = SuppressionTracker(
+            lead_accel_limit_mps2=cfg.lead_accel_limit_mps2,
+            settle_s=cfg.imu_only_settle_s,
+            span_s=cfg.max_window_s + cfg.suppress_hold_s,
+        )
+        self._picker = self._new_picker()
+        self._frame: DetectorFrame | None = None
+        self._t_last = -math.inf
+        self._last_event_t = -math.inf
+        self._last_cross_t = -math.inf  # crossing time of the last event reported
+        self._range_rate = math.nan
+        self._grids: dict[tuple[float, float], _Grid] = {}
+        self._whitened_cache: dict[
+            tuple[float, float, int, int], tuple[FloatArray, FloatArray]
+        ] = {}
+        self._whiteners = (_Whitener(_HEAVE, _AR_ORDER), _Whitener(_ROLL, _AR_ORDER))
+        # per background frame: differences of heave and roll, the ego's acceleration peak,
+        # the heave and roll innovations
+        self._ar_rows = np.full((math.ceil(cfg.background_s * _MAX_FPS), 5), np.nan)
+        self._innovation_std = np.full(2, np.nan)  # px, heave and roll
+        self._diff_std = np.full(2, np.nan)  # robust std of the frame-to-frame change, px
+        self._last_sigma = np.full((2, len(cfg.durations_s)), np.nan)
+        self._ar_n = 0
+        self._ego_level = math.nan  # the ego's background peak acceleration, m/s²
+        self._tau = math.nan  # the two-axle lag of the last fit, s
+        self._dt = math.nan  # the frame interval, s, and the frame count it was measured at
+        self._dt_at = 0
+        self._rate_at = -_RANGE_RATE_EVERY  # frame count of the last range-rate fit
+        self._focal = math.nan
+
+    def _new_picker(self) -> _ExcursionPicker:
+        return _ExcursionPicker(self.config.peak_window_s)
+
+    @property
+    def frame(self) -> DetectorFrame | None:
+        """The output for the last pushed sample (None before the first)."""
+        return self._frame
+
+    @property
+    def background_m(self) -> FloatArray:
+        """The background std of each amplitude at the last scored frame (channel heave /
+        roll, duration), m (NaN before the first)."""
+        return self._last_sigma
+
+    # -- per frame -----------------------------------------------------------------------
+    def push(self, sample: TrajectorySample) -> list[AnomalyEvent]:
+        """Take the next frame; return the events confirmed at it (suppressed ones included)."""
+        t = float(sample.t)
+        if not math.isfinite(t) or t <= self._t_last:
+            raise InputDataError(
+                f"trajectory sample t = {t!r} s: times must be finite and increase"
+                f" (previous {self._t_last} s)"
+            )
+        self._t_last = t
+        self._ring.push(self._row(sample))
+        suppressed = self._suppression.push(sample)
+        fit = self._fit(t, sample)
+        if fit is None:
+            self._frame = DetectorFrame(
+                t, math.nan, math.nan, math.nan, math.nan, 0, suppressed, threshold=math.nan
+            )
+            return self._confirm(self._picker.due(t), t)
+        cfg = self.config
+        learning = self._background.seconds < cfg.background_min_s
+        if learning and not (
+            self._whiteners[_HEAVE].version > 0 and math.isfinite(self._innovation_std[_HEAVE])
+        ):
+            # nothing known of the road yet: no score
+            self._update_background(t, fit, 0.0)
+            self._frame = DetectorFrame(
+                t, math.nan, math.nan, math.nan, math.nan, 0, suppressed, threshold=cfg.threshold_z
+            )
+            return self._confirm(self._picker.due(t), t)
+        # while the road is being learnt the whitening model stands for the background
+        # (its measured departure is not known yet) and the margin is wider
+        threshold = cfg.threshold_z * (cfg.learning_threshold_factor if learning else 1.0)
+        sigma = self._sigma(fit, learning=learning)
+        self._last_sigma = sigma
+        z = np.abs(fit.amplitude[:2]) / sigma  # (2, J)
+        with np.errstate(invalid="ignore"):
+            z = np.where(np.isfinite(z), z, -1.0)
+        c, j = np.unravel_index(int(np.argmax(z)), z.shape)
+        score = float(z[c, j])
+        self._update_background(t, fit, score)
+        height = float(fit.amplitude[_HEAVE, j])
+        self._frame = DetectorFrame(
+            t=t,
+            s=math.nan,
+            s_left=math.nan,
+            s_right=math.nan,
+            threshold_px=math.nan,
+            n_samples=int(fit.n_valid[j]),
+            suppressed=suppressed,
+            score=score if score >= 0 else math.nan,
+            threshold=threshold,
+            t_score=float(fit.t_cross[j]),
+            height_m=height if fit.metric else math.nan,
+            background_m=float(sigma[c, j]) if fit.metric else math.nan,
+        )
+        # what is confirmed now first, so that its refractory applies to this frame
+        events = self._confirm(self._picker.due(t), t)
+        for e in events:
+            if not e.suppressed:
+                self._last_cross_t = e.t_s
+        t_cross = float(fit.t_cross[j]) + 0.5 * float(self._durations[j])  # the pulse's middle
+        eligible = (
+            score >= threshold
+            and (not fit.metric or self._event_height(fit, int(j))[0] >= cfg.min_height_mm * 1e-3)
+            # the ringing of an anomaly already reported is no new anomaly
+            and not -cfg.refractory_s[0] <= t_cross - self._last_cross_t <= cfg.refractory_s[1]
+        )
+        value = score if eligible else -math.inf
+
+        def describe() -> tuple[AnomalyEvent, _Hypothesis]:
+            return self._describe(t, fit, sigma, int(c), int(j), score, suppressed)
+
+        self._picker.offer(t, value, describe)
+        if eligible:
+            self._last_event_t = t
+        return events
+
+    def _confirm(
+        self, confirmed: list[tuple[AnomalyEvent, _Hypothesis]], t: float
+    ) -> list[AnomalyEvent]:
+        """The events whose peak is confirmed now, with the height refined on the frames
+        seen since (`_refine`), emitted at ``t``."""
+        return [replace(self._refine(e, h), t_emit_s=t) for e, h in confirmed]
+
+    def _row(self, sample: TrajectorySample) -> FloatArray:
+        ok = sample.valid
+        y = sample.y_c if ok and math.isfinite(sample.y_c) else math.nan
+        yl, yr = sample.y_c_left, sample.y_c_right
+        yd = yl - yr if ok and math.isfinite(yl) and math.isfinite(yr) else math.nan
+        speed = sample.ego_speed_mps
+        d = sample.lead_distance_m
+        return np.array(
+            [
+                sample.t,
+                y,
+                yd,
+                sample.compensation_px,
+                d if math.isfinite(d) and d > 0 else math.nan,
+                math.nan if speed is None or not math.isfinite(speed) else speed,
+                float(int(sample.mode)),
+                sample.lead_distance_std_m,
+                sample.ego_accel_peak_mps2,
+            ]
+        )
+
+    def _lead_speed(self, rows: FloatArray) -> float:
+        """v_lead = ego speed + range rate (slope of the distance over ``range_rate_s``)."""
+        cfg = self.config
+        v_ego = rows[-1, _V]
+        if not math.isfinite(v_ego):
+            return math.nan
+        n = self._ring.n
+        if n - self._rate_at < _RANGE_RATE_EVERY and math.isfinite(self._range_rate):
+            return float(v_ego + self._range_rate)
+        self._rate_at = n
+        t = rows[:, _T]
+        recent = t >= t[-1] - cfg.range_rate_s
+        d = rows[recent, _D]
+        tt = t[recent]
+        ok = np.isfinite(d)
+        if np.count_nonzero(ok) >= 5 and tt[ok][-1] - tt[ok][0] >= 0.5 * cfg.range_rate_s:
+            tc = tt[ok] - tt[ok].mean()
+            slope = float(np.dot(tc, d[ok] - d[ok].mean()) / np.dot(tc, tc))
+            # the box (hence the distance) jumps while the lead bounces: a rate past what a
+            # car does is not believed
+            limit = cfg.max_range_rate_mps
+            self._range_rate = float(np.clip(slope, -limit, limit))
+        rate = self._range_rate if math.isfinite(self._range_rate) else 0.0
+        return float(v_ego + rate)
+
+    def _fit(self, t: float, sample: TrajectorySample) -> _Fit | None:
+        """Least-squares fits of every duration's template on each channel, prewhitened
+        (None: no fit possible at this frame: too little history, a lead standing still,
+        a gap in the window longer than ``max_gap_s``).
+
+        The channels are taken on the regular frame grid ending now (dropped frames and
+        short invalid stretches are interpolated), differenced and filtered by their
+        background's prediction-error filter (`_Whitener`); the templates go through the
+        same filters and are cached per (τ, frame interval, filter), residualised against a
+        constant within each duration's window, so that the fit is one small matrix
+        product per channel."""
+        cfg = self.config
+        rows = self._ring.last(cfg.buffer_frames)
+        if rows.shape[0] < cfg.min_frames:
+            return None
+        v_lead = self._lead_speed(rows)
+        if math.isfinite(v_lead) and v_lead < cfg.min_lead_speed_mps:
+            return None
+        tau = cfg.vehicle.wheelbase_m / v_lead if math.isfinite(v_lead) else math.nan
+        if math.isfinite(tau):
+            tau = round(tau / _TAU_STEP_S) * _TAU_STEP_S
+        lag = (0.0 if math.isnan(tau) else tau) + self._durations + cfg.post_s  # (J,)
+        focal = sample.focal_px
+        self._tau, self._focal = tau, focal
+        dt = self._frame_interval(rows[:, _T])
+        if not math.isfinite(dt):
+            return None
+        grid = self._grid(tau, dt, lag)
+        n = grid.s.shape[1]  # frames of the longest window plus the filters' history
+        x = self._on_grid(rows, t, dt, n)
+        if x is None:
+            return None
+        d = rows[-n:, _D] if rows.shape[0] >= n else rows[:, _D]
+        d_ok = d[np.isfinite(d)]
+        d_med = float(np.median(d_ok)) if d_ok.size else math.nan
+        if d_ok.size and (
+            d_med < cfg.min_distance_m or float(d_ok.max()) > cfg.max_distance_ratio * d_ok.min()
+        ):
+            # a lead nearer than a car's length, or one whose distance jumps within the
+            # window: the tracker holds something else (the road, a passing car, a box that
+            # grew), not a lead whose road we can read
+            return None
+        metric = bool(math.isfinite(focal) and focal > 0 and math.isfinite(d_med))
+        scale = -focal / d_med if metric else -1.0
+        j_n = len(lag)
+        amp = np.full((3, j_n), np.nan)
+        energy = np.full((2, j_n), np.nan)
+        innovation = np.full(2, np.nan)
+        heave, roll = self._whiteners
+        for c, w in enumerate((heave, roll, heave)):  # the compensation as the heave
+            xc = x[:, c]
+            if not np.isfinite(xc).all():
+                continue
+            s_r, ss = self._whitened(grid, w)
+            xw = w.apply(xc)
+            amp[c] = (s_r @ xw) / ss
+            if c < 2:
+                energy[c] = ss
+                innovation[c] = xw[-1]
+        return _Fit(
+            amplitude=amp / scale,
+            sigma_fit=1.0 / (np.sqrt(grid.ss_raw) * abs(scale)),
+            t_cross=t - lag,
+            valid_fraction=np.ones_like(lag),
+            n_valid=grid.n,
+            metric=metric,
+            energy=energy * scale * scale,
+            innovation=innovation,
+        )
+
+    def _on_grid(self, rows: FloatArray, t: float, dt: float, n: int) -> FloatArray | None:
+        """The channels (heave, roll, compensation) on the ``n`` grid times ending at ``t``
+        (n, 3): the frames themselves on a regular grid, else interpolated across dropped
+        frames and invalid stretches up to ``max_gap_s`` (a channel with a longer gap, or
+        no sample, is NaN); None when the heave channel has such a gap or the history is
+        too short. The lead's channels are also interpolated across the ego's own jolts
+        (`_jolt_mask`): the compensation misses part of such sharp motion."""
+        cfg = self.config
+        if rows.shape[0] >= n:
+            win = rows[-n:]
+            expected = t - dt * np.arange(n - 1, -1, -1)
+            x = win[:, (_Y, _YD, _COMP)]
+            jolted = self._jolt_mask(win)
+            regular = np.abs(win[:, _T] - expected).max() <= 0.25 * dt
+            if regular and not jolted.any() and np.isfinite(x[:, 0]).all():
+                return self._destep(x)
+        times = rows[:, _T]
+        grid_t = t - dt * np.arange(n - 1, -1, -1)
+        if times[0] > grid_t[0] + 0.5 * dt:
+            return None  # not enough history
+        first = max(int(np.searchsorted(times, grid_t[0], side="right")) - 1, 0)
+        times = times[first:]
+        jolted = self._jolt_mask(rows[first:])
+        allowed = cfg.max_gap_s + sum(cfg.jolt_mask_s) if jolted.any() else cfg.max_gap_s
+        out = np.full((n, 3), np.nan)
+        for c, col in enumerate((_Y, _YD, _COMP)):
+            vals = rows[first:, col]
+            ok = np.isfinite(vals) & (~jolted if c < 2 else True)
+            if np.count_nonzero(ok) < 2:
+                continue
+            tv = times[ok]
+            gaps = np.diff(np.concatenate([[grid_t[0]], tv, [grid_t[-1]]]))
+            if gaps.max() > allowed + 0.5 * dt:
+                continue
+            out[:, c] = np.interp(grid_t, tv, vals[ok])
+        return self._destep(out) if np.isfinite(out[:, 0]).all() else None
+
+    def _destep(self, x: FloatArray) -> FloatArray:
+        """The lead's channels without the tracker's jumps: a frame-to-frame change far
+        beyond the background's (``glitch_sigma`` robust stds) and beyond its neighbours'
+        (``glitch_ratio`` times the largest of the two frames either side; a body moves
+        smoothly, a re-seeded grid or a box that snaps does not) is taken out of every
+        later sample."""
+        cfg = self.config
+        out = x
+        for c in (_HEAVE, _ROLL):
+            sd = self._diff_std[c]
+            col = x[:, c]
+            if not math.isfinite(sd) or not np.isfinite(col).all() or col.size < 6:
+                continue
+            d = np.diff(col)
+            big = np.abs(d) > cfg.glitch_sigma * sd
+            if not big.any():
+                continue
+            a = np.abs(np.pad(d, 2, mode="edge"))
+            around = np.max(np.stack([a[:-4], a[1:-3], a[3:-1], a[4:]]), axis=0)
+            jump = big & (np.abs(d) > cfg.glitch_ratio * around)
+            if jump.any():
+                if out is x:
+                    out = x.copy()
+                out[1:, c] -= np.cumsum(np.where(jump, d, 0.0))
+        return out
+
+    def _jolt_mask(self, rows: FloatArray) -> NDArray[np.bool_]:
+        """Rows within ``jolt_mask_s`` (before, after) of a frame where the ego itself was
+        jolted: its band-passed vertical acceleration peaked at ``jolt_ratio`` times its
+        background and at least ``jolt_min_mps2``."""
+        cfg = self.config
+        peak = rows[:, _JOLT]
+        level = self._ego_level
+        if not math.isfinite(level):
+            return np.zeros(rows.shape[0], dtype=np.bool_)
+        with np.errstate(invalid="ignore"):
+            hit = peak >= max(cfg.jolt_ratio * level, cfg.jolt_min_mps2)
+        if not hit.any():
+            return hit
+        times = rows[:, _T]
+        before, after = cfg.jolt_mask_s
+        out = np.zeros_like(hit)
+        for tj in times[hit]:  # a handful of jolt frames per window
+            out |= (times >= tj - before) & (times <= tj + after)
+        return out
+
+    def _frame_interval(self, times: FloatArray) -> float:
+        """The median frame interval of the last frames, rounded to 0.1 ms (NaN: unknown);
+        re-measured every `_REMEASURE_FRAMES` frames (a camera keeps its rate)."""
+        n = self._ring.n
+        if times.size < 3:
+            return math.nan
+        if math.isnan(self._dt) or n - self._dt_at >= _REMEASURE_FRAMES:
+            dt = float(np.median(np.diff(times[-32:])))
+            self._dt = round(dt, 4) if dt > 0 else math.nan
+            self._dt_at = n
+        return self._dt
+
+    def _grid(self, tau: float, dt: float, lag: FloatArray) -> _Grid:
+        """The templates on the regular frame grid ending now (raw, zero outside each
+        duration's window), with the filters' history in front."""
+        key = (tau, dt)
+        grid = self._grids.get(key)
+        if grid is None:
+            cfg = self.config
+            span = lag + cfg.pre_s
+            m = math.ceil(float(span.max()) / dt) + 1
+            n = m + _AR_ORDER + 1
+            g = -dt * np.arange(n - 1, -1, -1)  # frame times relative to now
+            inside = g[None, :] >= -span[:, None] - 1e-9
+            rel = g[None, :] + lag[:, None]
+            s = self.bank.two_axle(rel, tau, cfg.vehicle.rho)
+            # the unwhitened fit's energy (against a line): the white tracking noise's floor
+            w = inside.astype(float)
+            cnt = w.sum(axis=1)
+            g_mean = (w * g).sum(axis=1) / cnt
+            gc = (g[None, :] - g_mean[:, None]) * w
+            s_in = s * w
+            s_mean = s_in.sum(axis=1) / cnt
+            slope = (gc * s_in).sum(axis=1) / (gc * gc).sum(axis=1)
+            s_line = (s_in - s_mean[:, None] - slope[:, None] * gc) * w
+            grid = _Grid(
+                key=key,
+                s=s,
+                inside=w[:, _AR_ORDER + 1 :],
+                ss_raw=(s_line * s_line).sum(axis=1),
+                n=cnt,
+            )
+            if len(self._grids) >= _MAX_GRIDS:
+                self._grids.pop(next(iter(self._grids)))
+            self._grids[key] = grid
+        return grid
+
+    def _whitened(self, grid: _Grid, whitener: _Whitener) -> tuple[FloatArray, FloatArray]:
+        """The grid's templates through ``whitener``, minus their mean within each window
+        (zero outside it), and their energies; cached per filter version."""
+        key = (*grid.key, whitener.channel, whitener.version)
+        hit = self._whitened_cache.get(key)
+        if hit is None:
+            sw = whitener.apply(grid.s)  # (J, m)
+            inside = grid.inside
+            cnt = inside.sum(axis=1)
+            mean = (sw * inside).sum(axis=1) / cnt
+            s_r = (sw - mean[:, None]) * inside
+            hit = (s_r, (s_r * s_r).sum(axis=1))
+            if len(self._whitened_cache) >= 4 * _MAX_GRIDS:
+                self._whitened_cache.clear()
+            self._whitened_cache[key] = hit
+        return hit
+
+    def _sigma(self, fit: _Fit, *, learning: bool = False) -> FloatArray:
+        """The background std of each amplitude (2, J): the running level, the tracking
+        noise at this distance and the floor, and for the heave channel the compensation's
+        share."""
+        cfg = self.config
+        # the white-noise std of each amplitude, times the background's measured departure
+        # from it (CFAR); never below the tracking noise carried through an unwhitened fit
+        white = self._innovation_std[:, None] / np.sqrt(fit.energy)
+        level = 1.0 if learning else self._background.level()
+        sig = np.maximum(white * level, cfg.tracking_noise_px * fit.sigma_fit)
+        comp = cfg.compensation_error_fraction * np.abs(fit.amplitude[_COMPENSATION])
+        sig[_HEAVE] = np.hypot(sig[_HEAVE], np.where(np.isfinite(comp), comp, 0.0))
+        # the halves never move quite alike: a share of the heave leaks into the roll channel
+        leak = cfg.roll_leak_fraction * np.abs(fit.amplitude[_HEAVE])
+        sig[_ROLL] = np.hypot(sig[_ROLL], np.where(np.isfinite(leak), leak, 0.0))
+        return np.asarray(sig)
+
+    def _update_background(self, t: float, fit: _Fit, score: float) -> None:
+        """A frame that may count as background: its amplitudes feed the running level, its
+        channels' differences the whitening filters (both refreshed together)."""
+        cfg = self.config
+        if t - self._last_event_t < cfg.guard_s or not fit.metric:
+            return
+        amp = np.abs(fit.amplitude[:2])
+        if not np.isfinite(amp).any():
+            return
+        last = self._ring.last(2)
+        if last.shape[0] == 2:
+            i = self._ar_n % self._ar_rows.shape[0]
+            self._ar_rows[i, 0] = last[1, _Y] - last[0, _Y]
+            self._ar_rows[i, 1] = last[1, _YD] - last[0, _YD]
+            self._ar_rows[i, 2] = last[1, _JOLT]
+            self._ar_rows[i, 3:5] = fit.innovation
+            self._ar_n += 1
+        if math.isfinite(self._innovation_std[_HEAVE]):
+            # the amplitudes in units of their white-noise std: independent of the filter
+            self._background.push(t, amp * np.sqrt(fit.energy) / self._innovation_std[:, None])
+        elif self._ar_n >= 2:
+            self._refresh_filters()
+        if self._background.pushes % self._background.refresh == 0:
+            self._refresh_filters()
+
+    def _refresh_filters(self) -> None:
+        """Refit the whitening filters to the background's differences, and the innovations'
+        robust std (under the filters in force when each frame was fitted: they change
+        slowly), floored by the tracking noise through the filter."""
+        cfg = self.config
+        held = self._ar_rows[: min(self._ar_n, self._ar_rows.shape[0])]
+        for c, w in enumerate(self._whiteners):
+            dx = held[:, c]
+            w.fit(dx[np.isfinite(dx)])
+            ok = dx[np.isfinite(dx)]
+            if ok.size >= 10:
+                self._diff_std[c] = float(np.median(np.abs(ok - np.median(ok)))) / _MAD_TO_STD
+            inn = held[:, 3 + c]
+            inn = inn[np.isfinite(inn)]
+            floor = cfg.tracking_noise_px * w.white_gain
+            if inn.size >= 5:
+                self._innovation_std[c] = max(float(np.median(np.abs(inn))) / _MAD_TO_STD, floor)
+        ego = held[:, 2]
+        ego = ego[np.isfinite(ego)]
+        self._ego_level = float(np.median(ego)) if ego.size >= 10 else math.nan
+
+    def _event_height(self, fit: _Fit, j: int) -> tuple[float, Side, float]:
+        """|height|, side and signed height of the anomaly at duration ``j``."""
+        a_h = float(fit.amplitude[_HEAVE, j])
+        a_r = float(fit.amplitude[_ROLL, j])
+        if not math.isfinite(a_r):
+            return abs(a_h), Side.UNKNOWN, a_h
+        if not math.isfinite(a_h) or abs(a_r) < self.config.one_sided_ratio * abs(a_h):
+            return abs(a_h), Side.BOTH, a_h
+        # one side of height h: the heave channel sees h / 2, the roll channel h on the
+        # left and -h on the right
+        if a_h * a_r >= 0:
+            return abs(a_r), Side.LEFT, a_r
+        return abs(a_r), Side.RIGHT, -a_r
+
+    def _describe(
+        self,
+        t: float,
+        fit: _Fit,
+        sigma: FloatArray,
+        c: int,
+        j: int,
+        score: float,
+        suppressed: SuppressionReason,
+    ) -> tuple[AnomalyEvent, _Hypothesis]:
+        cfg = self.config
+        _, side, height = self._event_height(fit, j)
+        rows = self._ring.last(cfg.buffer_frames)
+        times = rows[:, _T]
+        # the front axle over the anomaly's middle (its pulse's centre)
+        t_cross = float(fit.t_cross[j]) + 0.5 * float(self._durations[j])
+        i = int(np.clip(np.searchsorted(times, t_cross), 0, len(times) - 1))
+        d = rows[:, _D]
+        known = np.flatnonzero(np.isfinite(d))
+        if known.size:
+            i_d = int(known[np.argmin(np.abs(known - i))])
+            distance, distance_std = float(d[i_d]), float(rows[i_d, _DSTD])
+        else:
+            distance, distance_std = math.nan, math.nan
+        speed = float(rows[i, _V])
+        v_lead = self._lead_speed(rows)
+        if not fit.metric:
+            height = math.nan
+        return AnomalyEvent(
+            t_s=t_cross,
+            t_peak_s=t,
+            t_emit_s=math.nan,
+            s_px=math.nan,
+            s_left_px=math.nan,
+            s_right_px=math.nan,
+            threshold_px=math.nan,
+            side=side,
+            lead_distance_m=distance,
+            lead_distance_std_m=distance_std,
+            ego_speed_mps=speed if math.isfinite(speed) else None,
+            mode=FusionMode(int(rows[i, _MODE])),
+            valid_fraction=float(fit.valid_fraction[j]),
+            suppressed=suppressed,
+            score=score,
+            threshold=cfg.threshold_z,
+            height_m=height,
+            height_std_m=float(sigma[c, j]) if fit.metric else math.nan,
+            lead_speed_mps=v_lead,
+            anomaly_distance_m=distance + cfg.vehicle.rear_overhang_m + cfg.vehicle.wheelbase_m,
+            confidence=self.confidence(score),
+        ), _Hypothesis(
+            center_s=t_cross,
+            tau_s=self._tau,
+            channel=c,
+            noise_m=float(sigma[c, j]) if fit.metric else math.nan,
+            focal_px=self._focal,
+        )
+
+    def _refine(self, event: AnomalyEvent, hyp: _Hypothesis) -> AnomalyEvent:
+        """Crossing time, height, its std and the length from every duration's template
+        fitted to one common window, [centre - longest / 2 - pre - search, now], with the
+        pulse centres shifted by up to ± ``refine_search_s`` around the peak's: a fair
+        comparison of durations and alignments (each detection window ends at its own
+        template's end, and the matched filter's side lobes, half a body period off, fit
+        with the opposite sign). The best fit gives the crossing, the height and its sign;
+        the durations that fit within ``close_fit_fraction`` of it give the std (a short
+        anomaly's body response is its height x length, which trade)."""
+        cfg = self.config
+        dt = self._dt
+        if not math.isfinite(hyp.noise_m) or not math.isfinite(event.height_m) or not dt > 0:
+            return event
+        rows = self._ring.last(cfg.buffer_frames)
+        dur = self._durations
+        t_now = float(rows[-1, _T])
+        search = cfg.refine_search_s
+        earliest = hyp.center_s - search - 0.5 * float(dur.max()) - cfg.pre_s
+        n = math.ceil((t_now - earliest) / dt) + _AR_ORDER + 2
+        x = self._on_grid(rows, t_now, dt, n)
+        d = rows[np.isfinite(rows[:, _D]), _D]
+        if x is None or not d.size:
+            return event
+        # the channel that carries the anomaly whole: the roll channel for one side (the
+        # heave channel sees half of it), the heave channel for both
+        channel = _ROLL if event.side in (Side.LEFT, Side.RIGHT) else _HEAVE
+        xc = x[:, channel]
+        if not np.isfinite(xc).all():
+            return event
+        whitener = self._whiteners[channel]
+        grid_t = t_now - dt * np.arange(n - 1, -1, -1)
+        shifts = np.arange(-search, search + 0.5 * dt, dt)
+        centers = hyp.center_s + shifts  # (K,)
+        starts = centers[:, None] - 0.5 * dur[None, :]  # (K, J)
+        rel = grid_t[None, None, :] - starts[:, :, None]  # (K, J, n)
+        k_n, j_n = starts.shape
+        s = self.bank.two_axle(rel.reshape(k_n * j_n, n), hyp.tau_s, cfg.vehicle.rho, rows=j_n)
+        scale = -hyp.focal_px / float(np.median(d))
+        sw = whitener.apply(s * scale)
+        xw = whitener.apply(xc)
+        s_r = sw - sw.mean(axis=1, keepdims=True)
+        ss = (s_r * s_r).sum(axis=1)
+        amp = (s_r @ (xw - xw.mean())) / np.where(ss > 0, ss, np.nan)
+        energy = (amp * amp * ss).reshape(k_n, j_n)
+        amp = amp.reshape(k_n, j_n)
+        if not np.isfinite(energy).any():
+            return event
+        k, best = np.unravel_index(int(np.nanargmax(energy)), energy.shape)
+        # every (alignment, duration) that fits almost as well bounds the height
+        close = np.isfinite(energy) & (energy >= cfg.close_fit_fraction * energy[k, best])
+        sign = -1.0 if event.side is Side.RIGHT else 1.0
+        height = sign * float(amp[k, best])
+        spread = float(np.std(amp[close])) if np.count_nonzero(close) > 1 else 0.0
+        length = math.nan
+        if best > 0 and not close[:, 0].any() and math.isfinite(event.lead_speed_mps):
+            length = event.lead_speed_mps * float(dur[best])
+        t_cross = float(centers[k])
+        # the lead's distance at the refined crossing (nearest frame that has one)
+        times = rows[:, _T]
+        known = np.flatnonzero(np.isfinite(rows[:, _D]))
+        i = int(known[np.argmin(np.abs(times[known] - t_cross))])
+        distance = float(rows[i, _D])
+        v = cfg.vehicle
+        return replace(
+            event,
+            t_s=t_cross,
+            height_m=height,
+            height_std_m=math.hypot(hyp.noise_m, spread),
+            length_m=length,
+            lead_distance_m=distance,
+            lead_distance_std_m=float(rows[i, _DSTD]),
+            anomaly_distance_m=distance + v.rear_overhang_m + v.wheelbase_m,
+        )
+
+    def confidence(self, score: float) -> float:
+        """The calibrated probability that an event of this score is real."""
+        a, b = self.config.confidence_logit
+        x = a + b * math.log(max(score, 1e-9) / self.config.threshold_z)
+        return 1.0 / (1.0 + math.exp(-min(max(x, -50.0), 50.0)))
+
+    # -- stream control ------------------------------------------------------------------
+    def restart(self) -> list[AnomalyEvent]:
+        """A new target (the tracker switched vehicles): pending events, then an empty
+        window; the road's background is kept (it is the same road)."""
+        events = self.flush()
+        self._ring.clear()
+        self._picker = self._new_picker()
+        self._range_rate = math.nan
+        self._dt = math.nan
+        return events
+
+    def flush(self) -> list[AnomalyEvent]:
+        """End of stream: the pending event, confirmed at the last frame's time."""
+        return self._confirm(self._picker.flush(), self._t_last)
+
+    def run(self, samples: Iterable[TrajectorySample]) -> TwoAxleRun:
+        """Push every sample, flush, and return per-frame arrays and all events."""
+        rows: list[tuple[float, ...]] = []
+        events: list[AnomalyEvent] = []
+        for sample in samples:
+            events.extend(self.push(sample))
+            f = self._frame
+            assert f is not None
+            rows.append(
+                (f.t, f.score, f.t_score, f.height_m, f.background_m, float(int(f.suppressed)))
+            )
+        events.extend(self.flush())
+        table = np.array(rows, dtype=np.float64).reshape(-1, 6)
+        return TwoAxleRun(
+            t=table[:, 0].copy(),
+            score=table[:, 1].copy(),
+            t_score=table[:, 2].copy(),
+            height_m=table[:, 3].copy(),
+            background_m=table[:, 4].copy(),
+            suppressed=table[:, 5].astype(np.int64),
+            events=events,
+        )
+
+
+

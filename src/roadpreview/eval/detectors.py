@@ -1,0 +1,120 @@
+"""Every detector over a method's stored trajectory: scores, events, alerts and confirmations.
+
+The traces hold what each method's pipeline gave its detector per frame (the
+`TrajectorySample` stream, `roadpreview.eval.runner`); here a detector of the
+registry (`roadpreview.anomaly.DETECTORS`) runs over it exactly as inside
+`Pipeline.push_vision`: restarted where the tracker changed target, events
+turned into alerts by the `AlertBuilder`, alerts checked by the `EgoConfirmer`.
+So detectors are compared on identical inputs, and a detector's settings can
+change without recomputing a single vision pass.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from roadpreview.anomaly import AlertBuilder, AnomalyConfig, make_detector
+from roadpreview.anomaly.alert import Alert
+from roadpreview.anomaly.base import AnomalyEvent
+from roadpreview.anomaly.confirm import ConfirmationResult, EgoConfirmer
+from roadpreview.anomaly.roughness import RoadRoughness
+from roadpreview.eval.runner import Trace
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class DetectorTrace:
+    """One detector's output over one trace (recording clock)."""
+
+    detector: str
+    t: Array  #: frame times, s
+    score: Array  #: the detector's statistic per frame (NaN: undefined)
+    t_score: Array  #: the time each score describes, s
+    threshold: Array  #: the threshold on the score per frame
+    s: Array  #: the windowed std per frame (the std detector; NaN otherwise), px
+    height_m: Array  #: the fitted road input per frame (two-axle; NaN otherwise), m
+    events: list[AnomalyEvent] = field(default_factory=list)  #: suppressed ones included
+    alerts: list[Alert] = field(default_factory=list)
+    confirmations: list[ConfirmationResult] = field(default_factory=list)
+    #: the road's ISO 8608 class estimate at the end of the run (None: unknown)
+    road_class: str | None = None
+    seconds: float = math.nan  #: CPU time of the run, s
+
+    @property
+    def frames(self) -> int:
+        return int(self.t.size)
+
+
+def run_detector(
+    trace: Trace, anomaly: AnomalyConfig, detector: str | None = None
+) -> DetectorTrace:
+    """``detector`` (default: ``anomaly.detector``) over ``trace``'s trajectory."""
+    cfg = anomaly if detector is None else replace(anomaly, detector=detector)
+    name = cfg.detector
+    focal = trace.focal_px if math.isfinite(trace.focal_px) else None
+    det = make_detector(cfg, focal)
+    signal = cfg.std.signal
+    if signal.focal_px is None and focal is not None:
+        signal = replace(signal, focal_px=focal)
+    builder = AlertBuilder(cfg.alert, signal=signal)
+    confirmer = EgoConfirmer(cfg.confirm)
+    roughness = RoadRoughness(cfg.roughness, cfg.two_axle.vehicle)
+    samples = trace.samples()
+    changed = trace["target_changed"]
+    n = len(samples)
+    cols = np.full((6, n), np.nan)
+    events: list[AnomalyEvent] = []
+    alerts: list[Alert] = []
+    confirmations: list[ConfirmationResult] = []
+    c0 = time.process_time()
+    for i, sample in enumerate(samples):
+        new = det.restart() if changed[i] else []
+        new += det.push(sample)
+        f = det.frame
+        if f is not None:
+            cols[:, i] = (f.score, f.t_score, f.threshold, f.s, f.height_m, 0.0)
+        for e in new:
+            events.append(e)
+            a = builder.build(e)
+            if a is not None:
+                alerts.append(a)
+                confirmer.add(a.alert_id, a.t_s, a.distance_m, a.side)
+        confirmations += confirmer.push(sample.t, sample.ego_speed_mps, sample.ego_accel_peak_mps2)
+        roughness.push(
+            sample.t,
+            ego_speed_mps=sample.ego_speed_mps,
+            ego_accel_rms_mps2=sample.ego_accel_rms_mps2,
+            ego_accel_samples=1,
+            lead_y_c_px=sample.y_c,
+            lead_distance_m=sample.lead_distance_m,
+            focal_px=sample.focal_px,
+            lead_valid=sample.valid,
+        )
+    for e in det.flush():
+        events.append(e)
+        a = builder.build(e)
+        if a is not None:
+            alerts.append(a)
+    return DetectorTrace(
+        detector=name,
+        t=trace.t,
+        score=cols[0],
+        t_score=cols[1],
+        threshold=cols[2],
+        s=cols[3],
+        height_m=cols[4],
+        events=events,
+        alerts=alerts,
+        confirmations=confirmations,
+        road_class=roughness.state.iso_class,
+        seconds=time.process_time() - c0,
+    )
+
+
+__all__ = ["DetectorTrace", "run_detector"]

@@ -1,0 +1,173 @@
+"""The replay's CAN log writer (`CanOutputLog`): per alert RP_ALERT then RP_ALERT_DETAIL with the
+same AlertId, RP_CONFIRM at the frame that decided it, RP_STATUS + RP_ROAD_STATUS every period;
+everything E2E-valid and decoded back by cantools and by `OutputDecoder`."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from pathlib import Path
+
+import cantools
+import e2e.p01
+import pytest
+from cantools.database.can import Database
+
+from roadpreview.anomaly import Alert, Side
+from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult
+from roadpreview.anomaly.roughness import RoadState
+from roadpreview.canbus import (
+    OutputDecoder,
+    ReceivedAlert,
+    ReceivedAlertDetail,
+    ReceivedConfirm,
+    ReceivedRoadStatus,
+    ReceivedStatus,
+    Status,
+    read_can_log,
+)
+from roadpreview.errors import ConfigError
+from roadpreview.fusion.mode import FusionMode
+from roadpreview.pipeline.outputs import CanOutputLog
+
+REPO_DBC = Path(__file__).resolve().parents[2] / "data" / "roadpreview.dbc"
+T0 = 1.7e9  # Unix time, as the replay stamps frames
+
+
+def _alert(alert_id: int, t: float, height_mm: float) -> Alert:
+    return Alert(
+        t_s=t - 0.6,
+        t_emit_s=t,
+        distance_m=25.0,
+        time_to_arrival_s=1.8,
+        severity_px=7.4,
+        height_mm=height_mm,
+        side=Side.BOTH,
+        confidence=0.9,
+        mode=FusionMode.FUSED,
+        alert_id=alert_id,
+        height_std_mm=8.0,
+        length_m=0.5,
+        lead_speed_mps=12.0,
+    )
+
+
+def _status(k: int, precision: float | None = None, confirmed: int = 0) -> Status:
+    return Status(
+        mode=FusionMode.FUSED,
+        alerts_sent=k,
+        frames_processed=k,
+        road=RoadState("B", 60e-6, "B", 60e-6, "C", 200e-6),
+        precision=precision,
+        confirmed=confirmed,
+    )
+
+
+@pytest.fixture(scope="module")
+def plain_db() -> Database:
+    db = cantools.database.load_file(REPO_DBC, strict=True)
+    assert isinstance(db, Database)
+    return db
+
+
+def _run() -> CanOutputLog:
+    """1 s at 30 fps: two alerts at frame 3 (a bump and a pothole), a confirmation of the first
+    at frame 20, the status of each frame."""
+    log = CanOutputLog(0.1, detector="std")
+    bump, hole = _alert(1, T0 + 0.1, 42.0), _alert(2, T0 + 0.1, -66.0)
+    confirmed = ConfirmationResult(
+        1, Confirmation.CONFIRMED, T0 + 20 / 30, T0 + 20 / 30 - 0.8, 3.1, 0.6
+    )
+    for k in range(30):
+        t = T0 + k / 30
+        alerts = [bump, hole] if k == 3 else []
+        confirmations = [confirmed] if k == 20 else []
+        status = _status(k, 2 / 3 if k >= 20 else None, 1 if k >= 20 else 0)
+        log.frame(t, status, alerts, confirmations)
+    return log
+
+
+def test_the_log_writes_every_output_in_order() -> None:
+    log = _run()
+    ids = [m.arbitration_id for m in log.messages]
+    # status and road status together, at the first frame of every 100 ms
+    assert ids[:2] == [0x201, 0x202]
+    k = ids.index(0x200)
+    assert ids[k : k + 4] == [0x200, 0x203, 0x200, 0x203]  # each alert, then its details
+    assert ids.count(0x201) == ids.count(0x202) == 10
+    assert ids.count(0x204) == 1
+    for m in log.messages:  # every frame protected with its own message's data ID
+        assert e2e.p01.e2e_p01_check(bytearray(m.data), m.arbitration_id)
+    status_t = [m.timestamp for m in log.messages if m.arbitration_id == 0x201]
+    road_t = [m.timestamp for m in log.messages if m.arbitration_id == 0x202]
+    assert status_t == road_t
+    gaps = [b - a for a, b in itertools.pairwise(status_t)]
+    assert min(gaps) >= 0.1 - 1e-6  # one per period
+    assert max(gaps) <= 0.1 + 1 / 30 + 1e-6
+
+
+def test_the_log_decodes_to_what_was_sent(plain_db: Database) -> None:
+    log = _run()
+    rx = OutputDecoder()
+    back = [rx.decode(m) for m in log.messages]
+    assert rx.problems == {}
+    assert rx.lost == 0
+    alerts = [b for b in back if isinstance(b, ReceivedAlert)]
+    details = [b for b in back if isinstance(b, ReceivedAlertDetail)]
+    assert [a.alert_id for a in alerts] == [d.alert_id for d in details] == [1, 2]
+    assert alerts[0].height_mm == pytest.approx(42.0, abs=1.0)
+    assert alerts[1].height_mm == pytest.approx(-66.0, abs=1.0)  # the pothole: negative
+    assert all(d.detector == "std" for d in details)
+    assert details[0].score == pytest.approx(7.4, abs=0.1)
+    assert details[0].lead_speed_mps == pytest.approx(12.0, abs=0.25 / 3.6)
+    (confirm,) = [b for b in back if isinstance(b, ReceivedConfirm)]
+    assert confirm.alert_id == 1
+    assert confirm.outcome == Confirmation.CONFIRMED
+    assert confirm.t_rx_s == pytest.approx(T0 + 20 / 30)  # at the frame that decided it
+    assert confirm.arrival_age_s == pytest.approx(0.8, abs=0.01)
+    assert confirm.peak_mps2 == pytest.approx(3.1, abs=0.01)
+    assert confirm.precision == pytest.approx(2 / 3, abs=0.005)  # the status after the frame
+    roads = [b for b in back if isinstance(b, ReceivedRoadStatus)]
+    statuses = [b for b in back if isinstance(b, ReceivedStatus)]
+    assert len(roads) == len(statuses) == 10
+    assert all((r.iso_class, r.ego_class, r.lead_class) == ("B", "B", "C") for r in roads)
+    assert roads[0].precision is None  # before any confirmation: not available
+    assert roads[-1].precision == pytest.approx(2 / 3, abs=0.005)
+    assert (roads[0].confirmed, roads[-1].confirmed) == (0, 1)
+    # a plain cantools database reads the same log
+    by_id = {m.frame_id: m for m in plain_db.messages}
+    heads = [m for m in log.messages if m.arbitration_id in (0x200, 0x203)]
+    pairs = [by_id[m.arbitration_id].decode(m.data) for m in heads]
+    assert [p["AlertId"] for p in pairs] == [1, 1, 2, 2]
+    assert str(pairs[1]["DetailDetector"]) == "STD"
+    assert pairs[2]["AlertHeight"] == pytest.approx(-66.0, abs=1.0)
+
+
+def test_the_log_file_reads_back(tmp_path: Path) -> None:
+    log = _run()
+    path = tmp_path / "alerts.blf"
+    assert log.write(path) == len(log.messages)
+    rx = OutputDecoder()
+    back = [rx.decode(m) for m in read_can_log(path, errors="raise")]
+    assert [type(b) for b in back] == [type(OutputDecoder().decode(m)) for m in log.messages]
+    assert rx.problems == {}
+
+
+def test_a_status_at_its_defaults_and_no_confirmations_still_write() -> None:
+    """What `Pipeline.status()` gives while it does not fill the road part, and the replay's
+    call without confirmations."""
+    log = CanOutputLog()
+    log.frame(T0, Status(mode=FusionMode.DEGRADED), [_alert(7, T0, math.nan)])
+    ids = [m.arbitration_id for m in log.messages]
+    assert ids == [0x200, 0x203, 0x201, 0x202]
+    back = [OutputDecoder().decode(m) for m in log.messages]
+    detail, road = back[1], back[3]
+    assert isinstance(detail, ReceivedAlertDetail)
+    assert detail.detector == "two-axle"  # the default detector
+    assert isinstance(road, ReceivedRoadStatus)
+    assert road == ReceivedRoadStatus(T0, 0, None, None, None, None, None, None, 0, 0)
+
+
+def test_an_unknown_detector_fails_when_the_log_is_built() -> None:
+    with pytest.raises(ConfigError, match="'cnn'"):
+        CanOutputLog(detector="cnn")
