@@ -8,6 +8,7 @@ evaluation's numbers.
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 from typing import Any
@@ -15,6 +16,7 @@ from typing import Any
 import pytest
 
 from roadpreview.cli.main import main
+from roadpreview.eval.report import render
 
 pytestmark = pytest.mark.slow
 
@@ -80,6 +82,57 @@ def test_report_has_table1_and_figures(quick: dict[str, Any]) -> None:
     } <= names
     for name in names:
         assert f"](eval/{name})" in text, name
+
+
+def test_report_has_every_detector_and_the_product(quick: dict[str, Any]) -> None:
+    text = quick["report"].read_text()
+    res = quick["results"]["results"]
+    table_lines = [line for line in text.splitlines() if line.startswith("| ")]
+    detectors = res["e4"]["detectors"]
+    assert detectors
+    assert "### Every detector side by side" in text
+    for label in {m["label"] for m in quick["results"]["methods"].values()}:
+        for det in ("std", *detectors):
+            assert any(line.startswith(f"| {label} / {det} |") for line in table_lines), (
+                label,
+                det,
+            )
+    assert "e6" in res
+    for heading in (
+        "## E6: the product at its operating point",
+        "### Operating points (held-out folds)",
+        "### At the configured thresholds",
+        "### SVAR-like subset",
+        "### Height",
+        "### Ego confirmation",
+        "### Road class",
+        "### Generalization suite",
+    ):
+        assert heading in text, heading
+    # E6 comes after E5, and the product's reliability diagram is linked
+    assert text.index("## E5: beyond the paper") < text.index("## E6:")
+    if res["e6"]["product_detector"] == "two-axle":
+        assert "### Alert confidence" in text
+        fig = res["e6"]["reliability_figure"]
+        assert (quick["report"].parent / "eval" / fig).is_file()
+        assert f"](eval/{fig})" in text
+
+
+def test_report_renders_without_the_new_blocks(quick: dict[str, Any]) -> None:
+    data = copy.deepcopy(quick["results"])
+    e6 = data["results"]["e6"]
+    for key in ("calibration", "reliability_figure", "svar", "generalization"):
+        e6.pop(key, None)
+    e6["operating_points"]["detectors"]["std"]["fused-kalman"]["held_out"]["1"] = None
+    text = render(data)
+    assert "## E6: the product at its operating point" in text
+    assert "### Alert confidence" not in text
+    del data["results"]["e6"]
+    del data["results"]["e4"]["detectors"]
+    text = render(data)
+    assert "## E6:" not in text
+    assert "### Every detector side by side" not in text
+    assert "## E4: the paper's Table I" in text
 
 
 def test_a_second_run_reuses_everything(

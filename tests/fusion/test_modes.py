@@ -76,7 +76,7 @@ def test_validation_survives_single_failures_not_a_long_gap() -> None:
         sup.bad_frame(t)
     t += dt
     assert not sup.good_frame(t, True)
-    t += 0.4
+    t += sup.cfg.loss_time_s + 0.1
     sup.bad_frame(t)
     assert sup.trust is VisionTrust.LOST
 
@@ -84,7 +84,7 @@ def test_validation_survives_single_failures_not_a_long_gap() -> None:
 def test_revalidation_needs_consistent_frames_for_the_whole_period() -> None:
     sup = _trusted()
     sup.bad_frame(0.1)
-    sup.bad_frame(0.3)
+    sup.bad_frame(0.1 + sup.cfg.loss_time_s)
     dt = 1 / 30
     t = 1.0
     for _ in range(9):  # 0.267 s of good frames: not yet
@@ -111,13 +111,26 @@ def test_no_visual_news_for_too_long_loses_vision() -> None:
 
 
 def test_repeatedly_gated_vision_is_lost() -> None:
+    """Rejections in a row lose trusted vision only once they also span loss_time_s since
+    the last accepted measurement (a burst while the ego crosses a bump is bridged)."""
+    dt = 1 / 30
     sup = _trusted()
+    sup.gated(False, 5, 0.0)
+    t = 0.0
     for _ in range(4):
-        sup.gated(True, 5)
-    sup.gated(False, 5)
+        t += dt
+        sup.gated(True, 5, t)
+    t += dt
+    sup.gated(False, 5, t)
     assert sup.trusted()
-    for _ in range(5):
-        sup.gated(True, 5)
+    last_ok = t
+    for _ in range(8):  # 8 rejections in 0.27 s: a burst
+        t += dt
+        sup.gated(True, 5, t)
+    assert sup.trusted()
+    while t - last_ok < sup.cfg.loss_time_s - 1e-9:
+        t += dt
+        sup.gated(True, 5, t)
     assert sup.trust is VisionTrust.LOST
 
 
@@ -150,8 +163,9 @@ def test_neither_source_is_degraded_and_the_std_grows(kit) -> None:  # type: ign
     assert deg.size > 0
     assert 8.5 + 0.2 <= r.t[deg[0]] <= 8.5 + 0.3
     assert np.all(np.diff(r.std[deg]) > 0)
-    # vision is lost loss_time_s (0.3 s) after its last good frame
-    assert np.all(r.mode[(r.t > 8.35) & (r.t < 8.6)] == IMU_ONLY)
+    # vision is lost loss_time_s after its last good frame
+    loss = ModeConfig().loss_time_s
+    assert np.all(r.mode[(r.t > 8.05 + loss) & (r.t < 8.6)] == IMU_ONLY)
 
 
 def test_vision_that_disagrees_with_the_gyro_is_not_trusted_again(kit) -> None:  # type: ignore[no-untyped-def]
@@ -192,7 +206,7 @@ def test_failures_pushed_explicitly_count_as_bad_frames(kit) -> None:  # type: i
     lost = i + int(np.argmax(r.mode[i:] == IMU_ONLY))
     # the failed frames are bridged until loss_time_s after the last good frame
     assert np.all(r.mode[i:lost] == FUSED)
-    assert r.t[lost] - r.t[i - 1] == pytest.approx(0.3, abs=1.01 / 30)
+    assert r.t[lost] - r.t[i - 1] == pytest.approx(ModeConfig().loss_time_s, abs=1.01 / 30)
 
 
 def test_a_failed_fit_from_the_estimator_is_a_vision_failure() -> None:

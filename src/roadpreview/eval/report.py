@@ -11,10 +11,13 @@ import datetime as _dt
 import json
 import math
 import shutil
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from roadpreview.anomaly import DETECTORS
+from roadpreview.eval.product import THRESHOLD_FIELDS
 from roadpreview.eval.suite import EvalResults
 
 #: subsets of Table I, in column order
@@ -22,6 +25,11 @@ TABLE1_SUBSETS = ("entire", "hard", "easy")
 TRACKED_SUBSETS = ("tracked", "tracked-hard", "tracked-easy")
 #: fewer hard positives than this: the hard subset is flagged as too small to be meaningful
 MIN_HARD_POSITIVES = 15
+#: detectors of the registry (`roadpreview.anomaly.DETECTORS`) as the report names them
+DETECTOR_LABELS = {
+    "std": "windowed std (the paper's eq. 1)",
+    "two-axle": "two-axle matched filter against the road's background (CFAR)",
+}
 
 
 def _num(v: Any, fmt: str = ".2f") -> str:
@@ -58,40 +66,41 @@ def _label(d: Mapping[str, Any], m: str) -> str:
 
 
 # -- Table I ------------------------------------------------------------------------------------
+def _table1_cells(r: Mapping[str, Any], subsets: Sequence[str]) -> list[str]:
+    """BA, F and AUC of each subset of one Table I row (``{"subsets": {...}}``)."""
+    row: list[str] = []
+    for sub in subsets:
+        s = (r.get("subsets") or {}).get(sub)
+        if s is None:
+            row += ["–", "–", "–"]
+            continue
+        row += [_pm(s["ba_mean"], s["ba_std"]), _pm(s["f_mean"], s["f_std"]), _num(s["auc"])]
+    return row
+
+
 def table1_rows(d: Mapping[str, Any], subsets: Sequence[str] = TABLE1_SUBSETS) -> list[list[str]]:
     e4 = d["results"]["e4"]["methods"]
-    rows = []
-    for m, r in e4.items():
-        row = [_label(d, m)]
-        for sub in subsets:
-            s = r["subsets"].get(sub)
-            if s is None:
-                row += ["–", "–", "–"]
-                continue
-            row += [_pm(s["ba_mean"], s["ba_std"]), _pm(s["f_mean"], s["f_std"]), _num(s["auc"])]
-        rows.append(row)
+    rows = [[_label(d, m), *_table1_cells(r, subsets)] for m, r in e4.items()]
     ceiling = d["results"]["e4"].get("ceiling")
     if ceiling is not None:
-        row = [CEILING_LABEL]
-        for sub in subsets:
-            s = ceiling["subsets"].get(sub)
-            row += (
-                ["–", "–", "–"]
-                if s is None
-                else [_pm(s["ba_mean"], s["ba_std"]), _pm(s["f_mean"], s["f_std"]), _num(s["auc"])]
-            )
-        rows.append(row)
+        rows.append([CEILING_LABEL, *_table1_cells(ceiling, subsets)])
     return rows
 
 
-def table1_header(d: Mapping[str, Any], subsets: Sequence[str] = TABLE1_SUBSETS) -> list[str]:
-    anym = next(iter(d["results"]["e4"]["methods"].values()))
-    head = ["method"]
+def _table1_head(
+    methods: Mapping[str, Any], subsets: Sequence[str], first: str = "method"
+) -> list[str]:
+    anym: Mapping[str, Any] = next(iter(methods.values()), {})
+    head = [first]
     for sub in subsets:
-        s = anym["subsets"].get(sub, {})
+        s = (anym.get("subsets") or {}).get(sub, {})
         n = f" ({s.get('n_pos', 0)}+/{s.get('n_neg', 0)}−)"
         head += [f"{sub} BA{n}", f"{sub} F", f"{sub} AUC"]
     return head
+
+
+def table1_header(d: Mapping[str, Any], subsets: Sequence[str] = TABLE1_SUBSETS) -> list[str]:
+    return _table1_head(d["results"]["e4"]["methods"], subsets)
 
 
 def table1_text(d: Mapping[str, Any], subsets: Sequence[str] = TABLE1_SUBSETS) -> str:
@@ -122,6 +131,15 @@ def headline(d: Mapping[str, Any]) -> str:
                 f"set (folds {', '.join(_num(v) for v in fk['fold_thresholds_px'])}); "
                 "default 1.0 px"
             )
+        for det, r in (res["e4"].get("detectors") or {}).items():
+            fk = (r.get("methods") or {}).get("fused-kalman")
+            if fk:
+                sub = fk.get("subsets") or {}
+                lines.append(
+                    f"{det} detector, fused-kalman AUC: entire "
+                    f"{_num((sub.get('entire') or {}).get('auc'))}, hard "
+                    f"{_num((sub.get('hard') or {}).get('auc'))}"
+                )
     if "e1" in res:
         for m in ("uncompensated", "fused-kalman"):
             r = res["e1"]["methods"].get(m)
@@ -224,6 +242,8 @@ def render(d: Mapping[str, Any], *, fig_prefix: str = "eval/", command: str = ""
         _e3_section(d, w, fig_prefix)
     if "e5" in res:
         _e5_section(d, w, fig_prefix)
+    if "e6" in res:
+        _e6_section(d, w, fig_prefix)
     _timing_section(d, w)
     return "\n".join(out) + "\n"
 
@@ -429,15 +449,7 @@ def _e4_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
             f"the crossing), each bin against all {bs['n_neg']} backgrounds:"
         )
         w("")
-        names = list(bs["bins"][0]["auc"])
-        head = ["f abs(δ) / d (px)", "positives", *[_label(d, m) for m in names]]
-        rows = []
-        for b in bs["bins"]:
-            hi = "∞" if b["hi_px"] is None else f"{b['hi_px']:g}"
-            rows.append(
-                [f"[{b['lo_px']:g}, {hi})", str(b["n_pos"])] + [_num(b["auc"][m]) for m in names]
-            )
-        w(_md_table(head, rows))
+        w(_by_signal_table(d, bs))
         w("")
     w(f"![ROC curves]({fp}{e4['figure']})")
     w("")
@@ -481,6 +493,76 @@ def _e4_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
             "docs/pipeline.md) needs a higher threshold than the F-maximising one. "
             "The default is unchanged."
         )
+        w("")
+    if e4.get("detectors"):
+        _e4_detectors(d, w)
+
+
+def _by_signal_table(d: Mapping[str, Any], bs: Mapping[str, Any]) -> str:
+    """AUC per bin of expected signal (`experiments._auc_by_signal`), one column a method."""
+    bins = bs.get("bins") or []
+    names = list(bins[0]["auc"]) if bins else []
+    head = ["f abs(δ) / d (px)", "positives", *[_label(d, m) for m in names]]
+    rows = []
+    for b in bins:
+        hi = "∞" if b["hi_px"] is None else f"{b['hi_px']:g}"
+        rows.append(
+            [f"[{b['lo_px']:g}, {hi})", str(b["n_pos"])] + [_num(b["auc"].get(m)) for m in names]
+        )
+    return _md_table(head, rows)
+
+
+def _detector_label(det: str) -> str:
+    return DETECTOR_LABELS.get(det, det)
+
+
+def _e4_detectors(d: Mapping[str, Any], w: Any) -> None:
+    """Table I of every detector of the registry on the same clips, side by side."""
+    e4 = d["results"]["e4"]
+    others: Mapping[str, Any] = e4["detectors"]
+    dets = {"std": e4, **others}
+    product = (d.get("anomaly") or {}).get("detector")
+    w("### Every detector side by side")
+    w("")
+    w(
+        "Table I again with every detector of the registry scoring the same clips: a clip's "
+        "score is the largest of the detector's own statistic over its score window (the "
+        "windowed std s in px; the two-axle detector's z, the fitted road input over the "
+        "road's background std), cross-validated with the same folds, each detector's "
+        "threshold chosen on its own training folds. The ceiling rows run each detector on "
+        "the true compensated trajectory. Detectors: "
+        + "; ".join(f"`{det}` = {_detector_label(det)}" for det in dets)
+        + "."
+        + (f" The product runs `{product}`." if product else "")
+    )
+    w("")
+    methods = list(e4["methods"])
+    rows = []
+    for m in methods:
+        for det, r in dets.items():
+            res = (r.get("methods") or {}).get(m)
+            if res is not None:
+                rows.append([f"{_label(d, m)} / {det}", *_table1_cells(res, TABLE1_SUBSETS)])
+    for det, r in dets.items():
+        if r.get("ceiling") is not None:
+            rows.append([f"ceiling / {det}", *_table1_cells(r["ceiling"], TABLE1_SUBSETS)])
+    w(_md_table(_table1_head(e4["methods"], TABLE1_SUBSETS, "method / detector"), rows))
+    w("")
+    w(
+        "Clip counts in the header are those of the std detector's table; every detector "
+        "scores the same clips. `ceiling` = " + CEILING_LABEL + "."
+    )
+    w("")
+    for det, r in others.items():
+        bs = r.get("by_signal")
+        if not bs:
+            continue
+        w(
+            f"**AUC by signal strength, `{det}` detector** (bins as above, each against all "
+            f"{bs.get('n_neg', '–')} backgrounds):"
+        )
+        w("")
+        w(_by_signal_table(d, bs))
         w("")
 
 
@@ -739,6 +821,474 @@ def _e5_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
     )
     w("")
     w(f"![E5 lead time]({fp}{lt['figure']})")
+    w("")
+
+
+# -- E6: the product ----------------------------------------------------------------------------
+#: the outcome columns of the ego confirmation table, in this order (others follow)
+CONFIRMATION_COLUMNS = ("CONFIRMED", "NOT_FELT", "UNKNOWN", "pending")
+#: what each truth row of the ego confirmation table holds
+CONFIRMATION_ROWS = {
+    "felt": "real, the ego drives over it",
+    "beside": "real, the ego passes beside it",
+    "false": "false alarm",
+}
+#: the unit of each detector's threshold (`product.THRESHOLD_FIELDS`)
+THRESHOLD_UNITS = {"std": "px", "two-axle": "background std"}
+
+
+def _int(v: Any) -> str:
+    return "–" if v is None else str(v)
+
+
+def _hits(t: Mapping[str, Any] | None) -> str:
+    """A tally's recall with its hits / expected."""
+    if not t:
+        return "–"
+    return f"{_num(t.get('recall'))} ({_int(t.get('hits'))}/{_int(t.get('expected'))})"
+
+
+def _fa(t: Mapping[str, Any] | None) -> str:
+    """A tally's false alarms per minute with the count."""
+    if not t:
+        return "–"
+    return f"{_num(t.get('fa_per_min'))} ({_int(t.get('false_alarms'))})"
+
+
+def _unit(det: str) -> str:
+    return THRESHOLD_UNITS.get(det, "")
+
+
+def _e6_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
+    e6 = d["results"]["e6"]
+    det = e6.get("product_detector") or "–"
+    ref = e6.get("reference_method") or "–"
+    ref_label = _label(d, ref) if ref in d.get("methods", {}) else ref
+    w("## E6: the product at its operating point")
+    w("")
+    w(
+        f"The product as a chassis engineer judges it: the alerts of the `{det}` detector "
+        f"(the product's, `[anomaly] detector`) over the reference method `{ref}` "
+        f"({ref_label}) unless a table says otherwise, matched to the truth as "
+        "`roadpreview replay --truth` does (`roadpreview.pipeline.truthmatch`). Recall counts "
+        "the lead's crossings of an anomaly; a false alarm is an alert that matches none."
+    )
+    w("")
+    _e6_operating_points(d, w)
+    _e6_product_default(d, w)
+    _e6_svar(d, w)
+    _e6_height(d, w)
+    _e6_calibration(d, w, fp)
+    _e6_confirmation(d, w)
+    _e6_road_class(d, w)
+    _e6_generalization(d, w)
+
+
+def _e6_operating_points(d: Mapping[str, Any], w: Any) -> None:
+    e6 = d["results"]["e6"]
+    op = e6.get("operating_points")
+    if not op:
+        return
+    rates = [f"{r:g}" for r in op.get("fa_per_min") or []]
+    grids = op.get("grids") or {}
+    dets: Mapping[str, Any] = op.get("detectors") or {}
+    w("### Operating points (held-out folds)")
+    w("")
+    w(
+        f"Wild set. Recall of the anomalies with an expected signal f |δ| / d >= "
+        f"{_num(op.get('min_signal_px'), 'g')} px and false alarms per minute at each rate's "
+        "threshold: for each held-out fold, the lowest threshold of the detector's grid whose "
+        "training folds (recordings grouped, as Table I's) stay at or below the rate; the "
+        "figures are the held-out folds pooled. Fold thresholds in the detector's unit "
+        "(–: no threshold of the grid is quiet enough on the training folds, the fold sends "
+        "nothing). Grids: "
+        + "; ".join(
+            f"`{k}` {', '.join(f'{v:g}' for v in g)} {_unit(k)}".rstrip() for k, g in grids.items()
+        )
+        + ". Recall cells: recall (hits/expected); false alarms: per minute (count)."
+    )
+    w("")
+    head = ["method / detector"]
+    for r in rates:
+        head += [f"recall at <= {r} FA/min", f"FA/min at <= {r}", f"fold thresholds at <= {r}"]
+    rows = []
+    methods = list(next(iter(dets.values()), {}))
+    for m in methods:
+        for k, by_m in dets.items():
+            x = by_m.get(m)
+            if x is None:
+                continue
+            row = [f"{_label(d, m) if m in d['methods'] else m} / {k}"]
+            for r in rates:
+                h = (x.get("held_out") or {}).get(r)
+                thr = ", ".join(_num(t, "g") for t in (h or {}).get("thresholds") or []) or "–"
+                row += [_hits(h), _fa(h), thr]
+            rows.append(row)
+    w(_md_table(head, rows))
+    w("")
+    ref = e6.get("reference_method")
+    for k, by_m in dets.items():
+        curve = (by_m.get(ref) or {}).get("curve") if ref else None
+        if not curve:
+            continue
+        unit = _unit(k)
+        w(
+            f"The whole set's curve of `{ref}` with the `{k}` detector, per threshold"
+            + (f" ({unit})" if unit else "")
+            + ":"
+        )
+        w("")
+        head = ["threshold", *[_num(c.get("threshold"), "g") for c in curve]]
+        rows = [
+            ["recall (hits/expected)", *[_hits(c) for c in curve]],
+            ["FA/min (count)", *[_fa(c) for c in curve]],
+        ]
+        w(_md_table(head, rows))
+        w("")
+
+
+def _e6_product_default(d: Mapping[str, Any], w: Any) -> None:
+    e6 = d["results"]["e6"]
+    pdef: Mapping[str, Any] = e6.get("product_default") or {}
+    if not pdef:
+        return
+    anomaly = d.get("anomaly") or {}
+    configured = []
+    for k in pdef:
+        table = DETECTORS[k][2] if k in DETECTORS else k
+        field = THRESHOLD_FIELDS.get(k)
+        value = (anomaly.get(table) or {}).get(field) if field else None
+        if field and value is not None:
+            configured.append(f"`[anomaly.{table}] {field}` = {value:g} {_unit(k)}".rstrip())
+    w("### At the configured thresholds")
+    w("")
+    w(
+        "Wild set, the product's configuration"
+        + (f" ({', '.join(configured)})" if configured else "")
+        + ". Recall of every lead crossing of an anomaly and of those with f |δ| / d >= "
+        f"{_num((e6.get('operating_points') or {}).get('min_signal_px'), 'g')} px; "
+        "false alarms per minute (count) over the set's minutes."
+    )
+    w("")
+    rows = []
+    methods = list(next(iter(pdef.values()), {}))
+    for m in methods:
+        for k, by_m in pdef.items():
+            x = by_m.get(m)
+            if x is None:
+                continue
+            every, strong = x.get("all"), x.get("strong")
+            rows.append(
+                [
+                    f"{_label(d, m) if m in d['methods'] else m} / {k}",
+                    _hits(every),
+                    _hits(strong),
+                    _fa(every),
+                    _num((every or {}).get("minutes"), ".1f"),
+                ]
+            )
+    w(
+        _md_table(
+            [
+                "method / detector",
+                "recall, all",
+                "recall, strong signal",
+                "false alarms / min",
+                "minutes",
+            ],
+            rows,
+        )
+    )
+    w("")
+
+
+def _e6_svar(d: Mapping[str, Any], w: Any) -> None:
+    e6 = d["results"]["e6"]
+    sv = e6.get("svar")
+    if not sv:
+        return
+    e4 = d["results"].get("e4") or {}
+    full = {"std": e4.get("methods") or {}}
+    full |= {k: v.get("methods") or {} for k, v in (e4.get("detectors") or {}).items()}
+    dets: Mapping[str, Any] = sv.get("detectors") or {}
+    w("### SVAR-like subset")
+    w("")
+    w(
+        "Table I's AUC on positives chosen as the paper's annotators did (SVAR): the ego felt "
+        f"the anomaly (a vertical acceleration of its camera of at least "
+        f"{_num(sv.get('felt_mps2'), 'g')} m/s²) and the tracker saw the lead cross it; "
+        "every background clip. Beside it the AUC on the full wild set (E4). Clips: "
+        + "; ".join(
+            f"`{k}` {_int(x.get('positives'))}+/{_int(x.get('backgrounds'))}− "
+            f"(hard {_int(x.get('hard_positives'))}+/{_int(x.get('hard_backgrounds'))}−)"
+            for k, x in dets.items()
+        )
+        + "."
+    )
+    w("")
+    few = [k for k, x in dets.items() if (x.get("hard_positives") or 0) < MIN_HARD_POSITIVES]
+    if few:
+        w(
+            f"**The SVAR-like hard subset has fewer than {MIN_HARD_POSITIVES} positives for "
+            f"{', '.join(f'`{k}`' for k in few)}: its AUC is too noisy to rank the methods.**"
+        )
+        w("")
+    rows = []
+    first: Mapping[str, Any] = next(iter(dets.values()), {})
+    methods = list(first.get("methods") or {})
+    for m in methods:
+        for k, x in dets.items():
+            r = (x.get("methods") or {}).get(m)
+            if r is None:
+                continue
+            subs = (full.get(k, {}).get(m) or {}).get("subsets") or {}
+            rows.append(
+                [
+                    f"{_label(d, m) if m in d['methods'] else m} / {k}",
+                    _num(r.get("auc")),
+                    _num((subs.get("entire") or {}).get("auc")),
+                    _num(r.get("auc_hard")),
+                    _num((subs.get("hard") or {}).get("auc")),
+                ]
+            )
+    w(
+        _md_table(
+            [
+                "method / detector",
+                "SVAR-like AUC",
+                "full AUC",
+                "SVAR-like hard AUC",
+                "full hard AUC",
+            ],
+            rows,
+        )
+    )
+    w("")
+
+
+def _e6_height(d: Mapping[str, Any], w: Any) -> None:
+    e6 = d["results"]["e6"]
+    h: Mapping[str, Any] = e6.get("height") or {}
+    if not h:
+        return
+    w("### Height")
+    w("")
+    floor = next((x.get("min_signal_px") for x in h.values() if x), None)
+    w(
+        "The alerts' signed height against the matched anomaly's, on the true alerts whose "
+        f"anomaly has an expected signal f |δ| / d >= {_num(floor, 'g')} px: relative error "
+        "|ĥ − δ| / |δ|, the share with the right sign, and the share within two of the "
+        "alert's own height std."
+    )
+    w("")
+    rows = [
+        [
+            name,
+            _int(x.get("n")),
+            _num(x.get("median_rel_error"), ".0%"),
+            _num(x.get("p90_rel_error"), ".0%"),
+            _num(x.get("sign_correct"), ".0%"),
+            _num(x.get("within_2_std"), ".0%"),
+        ]
+        for name, x in h.items()
+        if x
+    ]
+    w(
+        _md_table(
+            [
+                "set",
+                "alerts",
+                "median relative error",
+                "p90 relative error",
+                "sign correct",
+                "within 2 std",
+            ],
+            rows,
+        )
+    )
+    w("")
+
+
+def _e6_calibration(d: Mapping[str, Any], w: Any, fp: str) -> None:
+    e6 = d["results"]["e6"]
+    cal = e6.get("calibration")
+    if not cal:
+        return
+
+    def ab(v: Any) -> str:
+        return "–" if not v else f"a = {_num(v[0])}, b = {_num(v[1])}"
+
+    w("### Alert confidence")
+    w("")
+    w(
+        f"The two-axle alerts' confidence (`{cal.get('method', '–')}`) is "
+        "P(real) = 1 / (1 + exp(−(a + b ln(z / threshold_z)))). Fitted on all wild drives: "
+        f"{ab(cal.get('fit_all_wild'))}; shipped (`[anomaly.two_axle] confidence_logit`): "
+        f"{ab(cal.get('shipped'))}. The wild set's reliability is cross-fitted (fit on the "
+        "training folds, applied to the held-out fold); the generalization suite's is that "
+        "of the shipped confidence, held out. ECE: expected calibration error, "
+        "Σ n_k / n |frequency_k − confidence_k| over bins of confidence."
+    )
+    w("")
+    rows = []
+    for name, label in (
+        ("wild_cross_fitted", "wild, cross-fitted"),
+        ("generalization_shipped", "generalization, shipped"),
+    ):
+        r = cal.get(name)
+        if not r:
+            continue
+        bins = r.get("bins") or []
+        rows.append([label, _int(r.get("n")), _num(r.get("ece")), "", ""])
+        rows += [
+            ["", _int(b.get("n")), "", _num(b.get("confidence")), _num(b.get("frequency"))]
+            for b in bins
+        ]
+    if rows:
+        w(_md_table(["set", "alerts", "ECE", "bin: mean confidence", "bin: share real"], rows))
+        w("")
+    fig = e6.get("reliability_figure")
+    if fig:
+        w(f"![E6 reliability]({fp}{fig})")
+        w("")
+
+
+def _e6_confirmation(d: Mapping[str, Any], w: Any) -> None:
+    e6 = d["results"]["e6"]
+    conf: Mapping[str, Any] = e6.get("confirmation") or {}
+    if not conf:
+        return
+    w("### Ego confirmation")
+    w("")
+    w(
+        "When the ego reaches an alert's spot its own IMU confirms the alert (CONFIRMED), "
+        "rejects it (NOT_FELT) or cannot tell (UNKNOWN); pending: never decided before the "
+        "drive ended. Rows: the truth behind each alert."
+    )
+    w("")
+    extra = [
+        c
+        for x in conf.values()
+        for r in (x or {}).values()
+        for c in r
+        if c not in CONFIRMATION_COLUMNS
+    ]
+    cols = [*CONFIRMATION_COLUMNS, *dict.fromkeys(extra)]
+    rows = []
+    for name, x in conf.items():
+        for kind, r in (x or {}).items():
+            rows.append([name, CONFIRMATION_ROWS.get(kind, kind), *[_int(r.get(c)) for c in cols]])
+    w(_md_table(["set", "truth", *cols], rows))
+    w("")
+
+
+def _e6_road_class(d: Mapping[str, Any], w: Any) -> None:
+    e6 = d["results"]["e6"]
+    rc: Mapping[str, Any] = e6.get("road_class") or {}
+    if not rc:
+        return
+    w("### Road class")
+    w("")
+    w(
+        "The road's ISO 8608 class estimated at the end of each drive against the drive's "
+        "class (true → estimate, ? = no estimate, × drives)."
+    )
+    w("")
+    rows = []
+    for name, x in rc.items():
+        if not x:
+            continue
+        pairs = Counter(f"{t}→{'?' if e is None else e}" for t, e in x.get("pairs") or [])
+        rows.append(
+            [
+                name,
+                str(sum(pairs.values())),
+                _num(x.get("exact"), ".0%"),
+                _num(x.get("within_one"), ".0%"),
+                _int(x.get("unknown")),
+                ", ".join(f"{p} ×{n}" for p, n in sorted(pairs.items())) or "–",
+            ]
+        )
+    w(_md_table(["set", "drives", "exact", "within one class", "no estimate", "pairs"], rows))
+    w("")
+
+
+def _e6_generalization(d: Mapping[str, Any], w: Any) -> None:
+    e6 = d["results"]["e6"]
+    g = e6.get("generalization")
+    w("### Generalization suite")
+    w("")
+    if not g:
+        w(
+            "Not in this run (the quick configuration has no generalization suite): the full "
+            "evaluation runs it."
+        )
+        w("")
+        return
+    w(
+        "Drives whose cameras, roads, conditions and lead vehicles differ from the wild set's. "
+        "**They are never used for tuning**: the thresholds of the operating points and the "
+        "confidence fit come from the wild set; the suite runs the product's configuration "
+        f"(`{g.get('method', '–')}`, detector `{e6.get('product_detector', '–')}`) as "
+        "shipped. Recall of the anomalies with f |δ| / d >= "
+        f"{_num(g.get('min_signal_px'), 'g')} px (one-sided: those under one of the lead's "
+        "wheel tracks only); false alarms per minute (count); mode changes of the fusion per "
+        "minute; textured: the share of frames with enough texture; height: median relative "
+        "error of the true alerts' height."
+    )
+    w("")
+    rows = []
+    for name, x in (g.get("drives") or {}).items():
+        size = x.get("size") or [None, None]
+        fps = x.get("fps")
+        camera = f"{_int(size[0])}x{_int(size[1])}@{_num(fps, 'g')}"
+        conditions = ", ".join(x.get("conditions") or []) or "none"
+        rows.append(
+            [
+                name,
+                camera,
+                f"{x.get('iso_class') or '–'} / {x.get('road_class_estimate') or '?'}",
+                conditions,
+                _hits(x),
+                _hits(x.get("one_sided")),
+                _fa(x),
+                _num(x.get("mode_changes_per_min"), ".1f"),
+                _num(x.get("textured_share"), ".0%"),
+                _num(x.get("height_median_rel_error"), ".0%"),
+            ]
+        )
+    total = g.get("total")
+    rows.append(
+        [
+            "**all drives**",
+            "",
+            "",
+            "",
+            _hits(total),
+            _hits(g.get("one_sided")),
+            _fa(total),
+            "",
+            "",
+            "",
+        ]
+    )
+    w(
+        _md_table(
+            [
+                "drive",
+                "camera",
+                "ISO class / estimate",
+                "conditions",
+                "recall",
+                "one-sided recall",
+                "false alarms / min",
+                "mode changes / min",
+                "textured",
+                "height error",
+            ],
+            rows,
+        )
+    )
     w("")
 
 

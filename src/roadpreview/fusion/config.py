@@ -167,14 +167,16 @@ class ModeConfig:
         " is bridged by the gyro without a switch)",
     )
     loss_time_s: float = param(
-        0.3,
+        0.5,
         unit="s",
         ge=0.0,
         le=10.0,
-        help="and those failures must span this long since the last good frame (9 frames at"
-        " 30 Hz): on rough roads the fit fails on single frames (wheel hop, blur) while the"
-        " frames between still measure; leaving FUSED for each made the mode flap 40-90"
-        " times a minute on class D/E roads. A validating vision survives gaps this short",
+        help="and those failures (or the back end's rejections) must span this long since"
+        " the last good frame (15 frames at 30 Hz): on rough roads the fit fails on single"
+        " frames (wheel hop, blur), and while the ego crosses a bump its increments disagree"
+        " with the gyro for a few frames, while the frames between still measure; leaving"
+        " FUSED for each made the mode flap 40-90 times a minute on class D/E roads. The gyro"
+        " bridges the gap; a validating vision survives gaps this short",
     )
     vision_timeout_s: float = param(
         0.25,

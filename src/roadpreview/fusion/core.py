@@ -576,15 +576,17 @@ class StreamingFusion(ABC):
                             "visual measurement at t=%.6f disagrees with the gyro: not fused",
                             m.t,
                         )
-                    sup.gated(True, self.max_rejections)
+                    sup.gated(True, self.max_rejections, tf)
                     continue
                 if not sup.good_frame(tf, consistent):
                     continue
             if apply:
                 if self._bk_visual(m, var):
-                    sup.rejected = 0  # `gated(False, ...)`, inline (max_rejections >= 1)
+                    # `gated(False, ...)`, inline (max_rejections >= 1)
+                    sup.rejected = 0
+                    sup.last_accepted_t = tf
                 else:
-                    sup.gated(True, self.max_rejections)
+                    sup.gated(True, self.max_rejections, tf)
             else:
                 fuse.append((m, var))
         return fuse

@@ -53,6 +53,8 @@ class ModeSupervisor:
     validating_since: float = math.nan
     #: when vision was last re-acquired (trusted again after a loss)
     reacquired_t: float = -math.inf
+    #: when the back end last accepted a visual measurement
+    last_accepted_t: float = -math.inf
     mode: FusionMode = FusionMode.DEGRADED
 
     def trusted(self) -> bool:
@@ -81,6 +83,7 @@ class ModeSupervisor:
             self.trust = _TRUSTED
             self.rejected = 0
             self.reacquired_t = t
+            self.last_accepted_t = t
             return True
         return False
 
@@ -110,10 +113,23 @@ class ModeSupervisor:
         if self.trust is _TRUSTED and t - self.last_good_t > self.cfg.vision_timeout_s:
             self.trust = _LOST
 
-    def gated(self, rejected: bool, max_rejections: int) -> None:
-        """Outcome of the back end's outlier gate for a fused measurement."""
-        self.rejected = self.rejected + 1 if rejected else 0
-        if self.rejected >= max_rejections and self.trust is _TRUSTED:
+    def gated(self, rejected: bool, max_rejections: int, t: float = math.inf) -> None:
+        """Outcome of the back end's outlier gate for a fused measurement at frame ``t``.
+
+        Trusted vision is lost after ``max_rejections`` rejections in a row that also span
+        ``loss_time_s`` since the last accepted measurement: while the ego crosses a bump
+        the increments disagree with the gyro for a few frames (a few ms of time offset at
+        10 deg/s), and leaving FUSED for each burst made the mode flap."""
+        if not rejected:
+            self.rejected = 0
+            self.last_accepted_t = t
+            return
+        self.rejected += 1
+        if (
+            self.rejected >= max_rejections
+            and self.trust is _TRUSTED
+            and t - self.last_accepted_t >= self.cfg.loss_time_s - 1e-9
+        ):
             self.trust = _LOST
             self.rejected = 0
 
