@@ -46,6 +46,23 @@ def test_a_felt_anomaly_is_confirmed_where_the_odometry_puts_it() -> None:
     assert c.precision() == pytest.approx(2 / 3)  # (1 + 1) / (1 + 2)
 
 
+def test_an_alert_made_after_its_crossing_counts_the_distance_driven_since() -> None:
+    """Alerts are made a second or more after the lead's crossing: the ego's odometry from
+    the crossing, not from the alert, places the spot."""
+    c = EgoConfirmer()
+    arrival = 10.0 + 19.8 / 10.0
+    out = []
+    rng = np.random.default_rng(0)
+    for t in np.arange(0.0, 30.0, 1 / 30):
+        if abs(t - 11.3) < 1 / 60:  # the alert about the crossing at 10 s, made at 11.3 s
+            c.add(1, t_s=10.0, distance_m=20.0, side=Side.BOTH)
+        peak = 4.0 if 0.0 <= t - (arrival + 0.05) < 0.1 else abs(rng.normal(0.0, 0.3))
+        out += c.push(float(t), 10.0, peak)
+    [r] = out
+    assert r.outcome is Confirmation.CONFIRMED
+    assert r.t_arrival_s == pytest.approx(arrival, abs=1 / 30 + 1e-9)
+
+
 def test_nothing_felt_is_not_felt_unless_one_sided_or_without_imu() -> None:
     c = EgoConfirmer()
     c.add(1, t_s=10.0, distance_m=20.0, side=Side.BOTH)

@@ -216,7 +216,9 @@ def test_the_same_road_at_three_resolutions_gives_the_same_detections(fps: float
         assert [round(e.t_s) for e in ev] == [10, 22, 33], focal
         assert [e.side for e in ev] == [Side.BOTH, Side.LEFT, Side.BOTH], focal
         for e, (_, h, _, _) in zip(ev, events, strict=True):
-            assert abs(e.height_m - h) < 2 * e.height_std_m
+            assert e.height_m * h > 0  # bump or pothole
+            # a short anomaly's height trades with its length: within its stated std
+            assert abs(e.height_m - h) < 2.5 * e.height_std_m
     # and alike at every resolution, within what each says of itself
     for k in range(len(events)):
         heights = [found[f][k].height_m for f in found]

@@ -317,12 +317,13 @@ class TwoAxleConfig:
         " margin (learning_threshold_factor)",
     )
     learning_threshold_factor: float = param(
-        1.5,
+        1.25,
         unit="",
         ge=1,
         le=10,
         help="while the road is being learnt (the first background_min_s), the whitening"
-        " model stands for the background and the threshold is this many times higher",
+        " model stands for the background (on the wild drives it overstates the background:"
+        " the measured level is 0.4-1.0 of it) and the threshold is this many times higher",
     )
     background_refresh_frames: int = param(
         30,

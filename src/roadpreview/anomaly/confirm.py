@@ -134,6 +134,7 @@ class EgoConfirmer:
         self._t = math.nan
         self._v = math.nan
         self._recent: deque[Confirmation] = deque(maxlen=self.config.precision_window)
+        self._odo: deque[tuple[float, float]] = deque()  # (frame time, distance driven)
         self.counts = {c: 0 for c in Confirmation}
 
     @property
@@ -142,13 +143,23 @@ class EgoConfirmer:
         return len(self._pending)
 
     def add(self, alert_id: int, t_s: float, distance_m: float | None, side: Side) -> None:
-        """An alert about a spot ``distance_m`` ahead of the camera at ``t_s``."""
+        """An alert about a spot ``distance_m`` ahead of the camera at ``t_s`` (its crossing,
+        usually a second or more before the alert is made: the distance the ego drove since
+        is taken from the odometry's history)."""
         if not self.config.enabled:
             return
         d = math.nan if distance_m is None else float(distance_m)
-        self._pending.append(
-            _Pending(alert_id, t_s, d, one_sided=side in (Side.LEFT, Side.RIGHT))
-        )
+        p = _Pending(alert_id, t_s, d, one_sided=side in (Side.LEFT, Side.RIGHT))
+        p.travelled_m = self._driven_since(t_s)
+        self._pending.append(p)
+
+    def _driven_since(self, t: float) -> float:
+        """Distance the ego drove from ``t`` to the last frame (0 before the history)."""
+        if not self._odo or t >= self._odo[-1][0]:
+            return 0.0
+        times = [r[0] for r in self._odo]
+        dists = [r[1] for r in self._odo]
+        return float(dists[-1] - np.interp(t, times, dists))
 
     def precision(self) -> float:
         """Running precision of the resolved alerts (None-free: 0.5 before any)."""
@@ -177,6 +188,10 @@ class EgoConfirmer:
         v_prev = self._v
         self._v = v
         step = 0.5 * (v + v_prev) * dt if math.isfinite(v) and math.isfinite(v_prev) else math.nan
+        odo = (self._odo[-1][1] if self._odo else 0.0) + (step if math.isfinite(step) else 0.0)
+        self._odo.append((t, odo))
+        while self._odo and self._odo[0][0] < t - cfg.max_wait_s:
+            self._odo.popleft()
         in_window = False
         out: list[ConfirmationResult] = []
         keep: list[_Pending] = []

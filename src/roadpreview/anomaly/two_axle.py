@@ -258,8 +258,12 @@ class _Whitener:
         return float(np.sqrt(np.sum(np.convolve(self.a, [1.0, -1.0]) ** 2)))
 
     def apply(self, x: FloatArray) -> FloatArray:
-        """Differences of ``x`` along its last axis through A(z), without the first p + 1
-        samples (the filters' start-up): ``x.shape[-1] - p - 1`` values."""
+        """Differences of ``x`` along its last axis through A(z) (an FIR filter), without
+        the first p + 1 samples (the filters' start-up): ``x.shape[-1] - p - 1`` values."""
+        if x.ndim == 1:
+            # the per-frame case: lfilter's output is the causal convolution
+            dx = np.diff(x)
+            return np.convolve(dx, self.a)[self.order : dx.size]
         dx = np.diff(x, axis=-1)
         y = signal.lfilter(self.a, [1.0], dx, axis=-1)
         return np.asarray(y[..., self.order :])
@@ -554,7 +558,7 @@ class TwoAxleDetector:
             return None
         d = rows[-n:, _D] if rows.shape[0] >= n else rows[:, _D]
         d_ok = d[np.isfinite(d)]
-        d_med = float(np.median(d_ok)) if d_ok.size else math.nan
+        d_med = float(d_ok.mean()) if d_ok.size else math.nan  # (jumps are refused below)
         if d_ok.size and (
             d_med < cfg.min_distance_m or float(d_ok.max()) > cfg.max_distance_ratio * d_ok.min()
         ):
@@ -641,9 +645,10 @@ class TwoAxleDetector:
             if not math.isfinite(sd) or not np.isfinite(col).all() or col.size < 6:
                 continue
             d = np.diff(col)
-            big = np.abs(d) > cfg.glitch_sigma * sd
-            if not big.any():
+            ad = np.abs(d)
+            if ad.max() <= cfg.glitch_sigma * sd:  # the usual case: no jump at all
                 continue
+            big = ad > cfg.glitch_sigma * sd
             a = np.abs(np.pad(d, 2, mode="edge"))
             around = np.max(np.stack([a[:-4], a[1:-3], a[3:-1], a[4:]]), axis=0)
             jump = big & (np.abs(d) > cfg.glitch_ratio * around)
@@ -895,13 +900,6 @@ class TwoAxleDetector:
         d = rows[np.isfinite(rows[:, _D]), _D]
         if x is None or not d.size:
             return event
-        # the channel that carries the anomaly whole: the roll channel for one side (the
-        # heave channel sees half of it), the heave channel for both
-        channel = _ROLL if event.side in (Side.LEFT, Side.RIGHT) else _HEAVE
-        xc = x[:, channel]
-        if not np.isfinite(xc).all():
-            return event
-        whitener = self._whiteners[channel]
         grid_t = t_now - dt * np.arange(n - 1, -1, -1)
         shifts = np.arange(-search, search + 0.5 * dt, dt)
         centers = hyp.center_s + shifts  # (K,)
@@ -909,22 +907,55 @@ class TwoAxleDetector:
         rel = grid_t[None, None, :] - starts[:, :, None]  # (K, J, n)
         k_n, j_n = starts.shape
         s = self.bank.two_axle(rel.reshape(k_n * j_n, n), hyp.tau_s, cfg.vehicle.rho, rows=j_n)
-        scale = -hyp.focal_px / float(np.median(d))
-        sw = whitener.apply(s * scale)
-        xw = whitener.apply(xc)
-        s_r = sw - sw.mean(axis=1, keepdims=True)
-        ss = (s_r * s_r).sum(axis=1)
-        amp = (s_r @ (xw - xw.mean())) / np.where(ss > 0, ss, np.nan)
-        energy = (amp * amp * ss).reshape(k_n, j_n)
-        amp = amp.reshape(k_n, j_n)
-        if not np.isfinite(energy).any():
+        s *= -hyp.focal_px / float(np.median(d))
+        # per channel: the whitened fit's correlation and energy at every (alignment,
+        # duration), weighted by the channel's white-noise variance (the roll channel's
+        # widened by the heave's leak)
+        corr, energy_c = [], []
+        sd = self._innovation_std
+        weights = (
+            1.0 / sd[_HEAVE] ** 2,
+            1.0 / (sd[_ROLL] ** 2 + (cfg.roll_leak_fraction * sd[_HEAVE]) ** 2),
+        )
+        for c in (_HEAVE, _ROLL):
+            xc = x[:, c]
+            if not np.isfinite(xc).all() or not math.isfinite(weights[c]):
+                corr.append(np.zeros(k_n * j_n))
+                energy_c.append(np.zeros(k_n * j_n))
+                continue
+            w = self._whiteners[c]
+            sw = w.apply(s)
+            s_r = sw - sw.mean(axis=1, keepdims=True)
+            xw = w.apply(xc)
+            corr.append(weights[c] * (s_r @ (xw - xw.mean())))
+            energy_c.append(weights[c] * (s_r * s_r).sum(axis=1))
+        # the GLRT of each side hypothesis: the channels' amplitudes are (h, 0) for both
+        # sides, (h / 2, h) for the left, (h / 2, -h) for the right
+        sides: tuple[tuple[Side, float, float], ...] = (
+            (Side.BOTH, 1.0, 0.0),
+            (Side.LEFT, 0.5, 1.0),
+            (Side.RIGHT, 0.5, -1.0),
+        )
+        if not (energy_c[_ROLL] > 0).any():
+            sides = ((Side.BOTH, 1.0, 0.0),)
+        best_e, best_side, amp, energy = -1.0, event.side, np.zeros(1), np.zeros(1)
+        for side, u_h, u_r in sides:
+            num = u_h * corr[_HEAVE] + u_r * corr[_ROLL]
+            den = u_h * u_h * energy_c[_HEAVE] + u_r * u_r * energy_c[_ROLL]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                a = num / np.where(den > 0, den, np.nan)
+                e = a * num
+            if np.isfinite(e).any() and float(np.nanmax(e)) > best_e:
+                best_e, best_side, amp, energy = float(np.nanmax(e)), side, a, e
+        if best_e < 0:
             return event
-        k, best = np.unravel_index(int(np.nanargmax(energy)), energy.shape)
+        e2 = energy.reshape(k_n, j_n)
+        a2 = amp.reshape(k_n, j_n)
+        k, best = np.unravel_index(int(np.nanargmax(e2)), e2.shape)
         # every (alignment, duration) that fits almost as well bounds the height
-        close = np.isfinite(energy) & (energy >= cfg.close_fit_fraction * energy[k, best])
-        sign = -1.0 if event.side is Side.RIGHT else 1.0
-        height = sign * float(amp[k, best])
-        spread = float(np.std(amp[close])) if np.count_nonzero(close) > 1 else 0.0
+        close = np.isfinite(e2) & (e2 >= cfg.close_fit_fraction * e2[k, best])
+        spread = float(np.std(a2[close])) if np.count_nonzero(close) > 1 else 0.0
+        height = float(a2[k, best])
         length = math.nan
         if best > 0 and not close[:, 0].any() and math.isfinite(event.lead_speed_mps):
             length = event.lead_speed_mps * float(dur[best])
@@ -935,9 +966,12 @@ class TwoAxleDetector:
         i = int(known[np.argmin(np.abs(times[known] - t_cross))])
         distance = float(rows[i, _D])
         v = cfg.vehicle
+        if event.side is Side.UNKNOWN:
+            best_side = Side.UNKNOWN  # no halves: the side stays unknown
         return replace(
             event,
             t_s=t_cross,
+            side=best_side,
             height_m=height,
             height_std_m=math.hypot(hyp.noise_m, spread),
             length_m=length,
@@ -989,6 +1023,3 @@ class TwoAxleDetector:
             suppressed=table[:, 5].astype(np.int64),
             events=events,
         )
-
-
-

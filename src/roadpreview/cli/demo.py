@@ -26,7 +26,13 @@ def add_subparser(sub: Any) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from roadpreview.pipeline.replay import ReplayInputs, format_modes, print_progress, replay
+    from roadpreview.pipeline.replay import (
+        ReplayInputs,
+        format_alerts,
+        format_modes,
+        print_progress,
+        replay,
+    )
     from roadpreview.sim.dataset import drive_config
     from roadpreview.sim.recording import write_recording
     from roadpreview.sim.scenario import ScenarioConfig
@@ -58,9 +64,20 @@ def _run(args: argparse.Namespace) -> int:
     print("\n\nanomalies the lead crossed, against the truth:")
     assert result.match is not None
     print(result.match.table())
+    print("\nalerts (what RP_ALERT carried, and what the ego felt when it got there):")
+    print(format_alerts(result.alerts, result.confirmations, result.video_start_s))
+    road = result.road
+    print(
+        f"\nroad class (ISO 8608): {road.iso_class or 'unknown'} (ego's IMU "
+        f"{road.ego_class or '-'}, lead {road.lead_class or '-'}); the drive's road is class "
+        f"{cfg.motion.road.iso_class}"
+    )
     print("\nfusion modes:")
     print(format_modes(result.mode_changes, result.video_start_s))
-    print(f"\noutputs: {out / 'alerts.blf'} (RP_ALERT + RP_STATUS), {out / 'alerts.jsonl'},")
+    print(
+        f"\noutputs: {out / 'alerts.blf'} (RP_ALERT, RP_ALERT_DETAIL, RP_CONFIRM, RP_STATUS, "
+        f"RP_ROAD_STATUS), {out / 'alerts.jsonl'},"
+    )
     print(f"         {out / 'frames.csv'}, {out / 'plots.png'}, {out / 'summary.json'}")
     print(
         f"speed: {result.frames} frames in {result.seconds:.1f} s = {result.fps:.1f} fps "

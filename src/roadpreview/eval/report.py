@@ -1138,14 +1138,18 @@ def _e6_calibration(d: Mapping[str, Any], w: Any, fp: str) -> None:
         r = cal.get(name)
         if not r:
             continue
-        bins = r.get("bins") or []
-        rows.append([label, _int(r.get("n")), _num(r.get("ece")), "", ""])
         rows += [
-            ["", _int(b.get("n")), "", _num(b.get("confidence")), _num(b.get("frequency"))]
-            for b in bins
+            [label, _num(b.get("confidence")), _num(b.get("frequency")), _int(b.get("n")), ""]
+            for b in r.get("bins") or []
         ]
+        rows.append([f"**{label}, all**", "", "", _int(r.get("n")), _num(r.get("ece"))])
     if rows:
-        w(_md_table(["set", "alerts", "ECE", "bin: mean confidence", "bin: share real"], rows))
+        w(
+            "Reliability per bin of confidence (tenths; empty bins left out): the bin's mean "
+            "confidence against the share of its alerts that were real."
+        )
+        w("")
+        w(_md_table(["set", "mean confidence", "share real", "alerts", "ECE"], rows))
         w("")
     fig = e6.get("reliability_figure")
     if fig:
@@ -1226,22 +1230,23 @@ def _e6_generalization(d: Mapping[str, Any], w: Any) -> None:
         w("")
         return
     w(
-        "Drives whose cameras, roads, conditions and lead vehicles differ from the wild set's. "
+        "Drives that each fix their own camera, road class, speed and gap, lead vehicle and "
+        "conditions (`roadpreview.sim.presets.GENERALIZATION_DRIVES`). "
         "**They are never used for tuning**: the thresholds of the operating points and the "
         "confidence fit come from the wild set; the suite runs the product's configuration "
         f"(`{g.get('method', '–')}`, detector `{e6.get('product_detector', '–')}`) as "
         "shipped. Recall of the anomalies with f |δ| / d >= "
-        f"{_num(g.get('min_signal_px'), 'g')} px (one-sided: those under one of the lead's "
-        "wheel tracks only); false alarms per minute (count); mode changes of the fusion per "
+        f"{_num(g.get('min_signal_px'), 'g')} px (one-sided: those under only one of the "
+        "lead's wheel tracks); false alarms per minute (count); mode changes of the fusion per "
         "minute; textured: the share of frames with enough texture; height: median relative "
         "error of the true alerts' height."
     )
     w("")
     rows = []
     for name, x in (g.get("drives") or {}).items():
-        size = x.get("size") or [None, None]
-        fps = x.get("fps")
-        camera = f"{_int(size[0])}x{_int(size[1])}@{_num(fps, 'g')}"
+        size, fps = x.get("size"), x.get("fps")
+        camera = f"{size[0]}x{size[1]}" if size else "–"
+        camera += f"@{fps:g}" if fps is not None else ""
         conditions = ", ".join(x.get("conditions") or []) or "none"
         rows.append(
             [

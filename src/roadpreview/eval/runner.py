@@ -52,9 +52,9 @@ Array = NDArray[np.float64]
 #: bump when the trace layout or the way traces are produced changes
 TRACE_FORMAT = 4
 _PACKAGE = Path(__file__).resolve().parents[1]
-#: sub-packages whose source does not change what a trace holds (the detectors run on the
-#: stored trajectory afterwards)
-_NOT_PIPELINE = ("eval", "cli", "bench", "sim", "anomaly")
+#: sub-packages and modules whose source does not change what a trace holds (the detectors
+#: run on the stored trajectory afterwards; the output writers only write files)
+_NOT_PIPELINE = ("eval", "cli", "bench", "sim", "anomaly", "pipeline/outputs.py")
 
 
 # -- digests ------------------------------------------------------------------------------------

@@ -46,11 +46,18 @@ class FrameTableWriter:
         self._w = csv.writer(self._fh)
         self._w.writerow(FrameResult.COLUMNS)
 
+    #: columns that are times: they keep microseconds whatever their epoch
+    TIME_COLUMNS = frozenset({"t", "score_t"})
+
     def write(self, r: FrameResult) -> None:
-        row = r.row()
-        # the time keeps microseconds whatever its epoch; the rest 6 significant digits
+        # times with microseconds, the rest with 6 significant digits
         self._w.writerow(
-            [f"{row[0]:.6f}", *(f"{v:.6g}" if isinstance(v, float) else v for v in row[1:])]
+            [
+                (f"{v:.6f}" if name in self.TIME_COLUMNS else f"{v:.6g}")
+                if isinstance(v, float)
+                else v
+                for name, v in zip(FrameResult.COLUMNS, r.row(), strict=True)
+            ]
         )
 
     def close(self) -> None:
@@ -221,7 +228,23 @@ class AnnotatedVideoWriter:
         self._w.release()
 
 
-def write_jsonl(path: Path, alerts: Sequence[Alert]) -> None:
+def write_jsonl(
+    path: Path, alerts: Sequence[Alert], confirmations: Sequence[ConfirmationResult] = ()
+) -> None:
+    """One JSON object per alert; an alert whose spot the ego passed carries what it felt
+    there (``confirmation``: CONFIRMED / NOT_FELT / UNKNOWN, ``confirmation_t_s``,
+    ``ego_peak_mps2``, ``ego_background_mps2``, ``ego_arrival_t_s``); null while pending."""
+    by_id = {c.alert_id: c for c in confirmations}
     with path.open("w") as fh:
         for a in alerts:
-            fh.write(json.dumps(alert_json(a)) + "\n")
+            d = alert_json(a)
+            c = by_id.get(a.alert_id)
+            d["confirmation"] = None if c is None else c.outcome.name
+            for key, value in (
+                ("confirmation_t_s", None if c is None else c.t_s),
+                ("ego_arrival_t_s", None if c is None else c.t_arrival_s),
+                ("ego_peak_mps2", None if c is None else c.peak_mps2),
+                ("ego_background_mps2", None if c is None else c.background_mps2),
+            ):
+                d[key] = value if value is None or math.isfinite(value) else None
+            fh.write(json.dumps(d) + "\n")

@@ -21,6 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from roadpreview.anomaly.alert import Alert
+from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult
+from roadpreview.anomaly.roughness import RoadState
 from roadpreview.camera import CameraModel
 from roadpreview.canbus.imu_csv import imu_samples, read_imu_csv
 from roadpreview.errors import InputDataError
@@ -90,6 +92,9 @@ class ReplayResult:
     decode_failures: int = 0
     input_errors: int = 0
     results: list[FrameResult] | None = None
+    #: the ego's check of each alerted spot it passed
+    confirmations: list[ConfirmationResult] = field(default_factory=list)
+    road: RoadState = field(default_factory=RoadState)  #: the road class at the end
 
     @property
     def fps(self) -> float:
@@ -140,6 +145,7 @@ def replay(
         if annotated_video:
             annot = AnnotatedVideoWriter(out_dir / "annotated.mp4", video.fps, video.size)
     alerts: list[Alert] = []
+    confirmations: list[ConfirmationResult] = []
     modes: list[tuple[float, FusionMode, str]] = []
     results: list[FrameResult] = []
     frames = 0
@@ -162,6 +168,7 @@ def replay(
             if not modes or modes[-1][1] != r.mode:
                 modes.append((t, r.mode, r.pitch_reason or r.vision_reason))
             alerts.extend(r.alerts)
+            confirmations.extend(r.confirmations)
             can_out.frame(t, pipeline.status(), r.alerts, r.confirmations)
             series.add(r)
             if table is not None:
@@ -201,10 +208,12 @@ def replay(
         decode_failures=video.decode_failures,
         input_errors=pipeline.can_decoder.stats.skipped,
         results=results if keep_results else None,
+        confirmations=confirmations,
+        road=pipeline.last.road if pipeline.last is not None else RoadState(),
     )
     if out_dir is not None:
         can_out.write(out_dir / "alerts.blf")
-        write_jsonl(out_dir / "alerts.jsonl", alerts)
+        write_jsonl(out_dir / "alerts.jsonl", alerts, confirmations)
         truth_times = [
             start + float(e["lead_front_t_s"])
             for e in inputs.truth_events or []
@@ -221,6 +230,14 @@ def replay(
             "mode_changes": [
                 {"t_s": round(t - start, 3), "mode": m.name, "reason": why} for t, m, why in modes
             ],
+            "detector": config.anomaly.detector,
+            "road_class": result.road.iso_class,
+            "road_class_ego": result.road.ego_class,
+            "road_class_lead": result.road.lead_class,
+            "confirmations": {
+                c.name: sum(x.outcome is c for x in confirmations) for c in Confirmation
+            },
+            "pending_confirmations": len(alerts) - len(confirmations),
         }
         if match is not None:
             summary["truth"] = {
@@ -231,6 +248,31 @@ def replay(
             }
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     return result
+
+
+def format_alerts(
+    alerts: Sequence[Alert], confirmations: Sequence[ConfirmationResult], t0: float
+) -> str:
+    """The alerts as a table (times from ``t0``), with the ego's confirmation of each."""
+    felt = {c.alert_id: c for c in confirmations}
+    lines = [
+        "   id  crossing  distance  arrives in   height            side   confidence  ego felt"
+    ]
+    for a in alerts:
+        c = felt.get(a.alert_id)
+        height = "      -       " if a.height_mm is None else f"{a.height_mm:+5.0f} mm"
+        if a.height_mm is not None and a.height_std_mm is not None:
+            height += f" ± {a.height_std_mm:3.0f}"
+        dist = "   -   " if a.distance_m is None else f"{a.distance_m:5.1f} m"
+        tta = "   -   " if a.time_to_arrival_s is None else f"{a.time_to_arrival_s:5.2f} s"
+        outcome = "pending" if c is None else c.outcome.name
+        if c is not None and math.isfinite(c.peak_mps2):
+            outcome += f" ({c.peak_mps2:.1f} m/s²)"
+        lines.append(
+            f"{a.alert_id:5d}  {a.t_s - t0:7.2f} s  {dist}  {tta}    {height:16s}  "
+            f"{a.side.name:5s}  {100 * a.confidence:8.0f} %  {outcome}"
+        )
+    return "\n".join(lines) if alerts else "   (none)"
 
 
 def print_progress(frames: int, seconds: float) -> None:
