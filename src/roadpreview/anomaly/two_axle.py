@@ -233,6 +233,7 @@ class _Whitener:
         self.channel = channel
         self.order = order
         self.a = np.array([1.0])
+        self._b = np.array([1.0, -1.0])  # differences, then A(z): one FIR filter
         self.version = 0
 
     def fit(self, dx: FloatArray) -> None:
@@ -250,20 +251,21 @@ class _Whitener:
             return
         if np.all(np.isfinite(coef)):
             self.a = np.concatenate([[1.0], -coef])
+            self._b = np.convolve(self.a, [1.0, -1.0])
             self.version += 1
 
     @property
     def white_gain(self) -> float:
         """Std of the output for white input of unit std (differences, then A(z))."""
-        return float(np.sqrt(np.sum(np.convolve(self.a, [1.0, -1.0]) ** 2)))
+        return float(np.sqrt(np.sum(self._b**2)))
 
     def apply(self, x: FloatArray) -> FloatArray:
         """Differences of ``x`` along its last axis through A(z) (an FIR filter), without
         the first p + 1 samples (the filters' start-up): ``x.shape[-1] - p - 1`` values."""
         if x.ndim == 1:
-            # the per-frame case: lfilter's output is the causal convolution
-            dx = np.diff(x)
-            return np.convolve(dx, self.a)[self.order : dx.size]
+            # the per-frame case: the causal convolution with (1 - z^-1) A(z), past the
+            # start-up (the same values as the differences through lfilter below)
+            return np.convolve(x, self._b)[self.order + 1 : x.size]
         dx = np.diff(x, axis=-1)
         y = signal.lfilter(self.a, [1.0], dx, axis=-1)
         return np.asarray(y[..., self.order :])
