@@ -35,6 +35,7 @@ from roadpreview.anomaly.alert import Alert
 from roadpreview.anomaly.confirm import Confirmation
 from roadpreview.eval.clips import ClipTable
 from roadpreview.eval.metrics import auc
+from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.truthmatch import match_alerts
 
 if TYPE_CHECKING:
@@ -469,6 +470,13 @@ def mode_changes(modes: NDArray[Any]) -> int:
     return int(np.count_nonzero(np.diff(modes) != 0)) if len(modes) > 1 else 0
 
 
+def mode_changes_after_startup(modes: NDArray[Any]) -> int:
+    """Changes of the fusion mode after it was first FUSED (the start-up's own changes,
+    from no lead and an unsettled gyro to FUSED, left out)."""
+    fused = np.flatnonzero(np.asarray(modes) == int(FusionMode.FUSED))
+    return mode_changes(np.asarray(modes)[fused[0] :]) if fused.size else 0
+
+
 def generalization(data: EvalData, method: str) -> dict[str, Any]:
     """Per suite drive at the product's configuration: false alarms per minute, recall of
     anomalies with f|δ|/d >= `SUITE_MIN_SIGNAL_PX` (and of the one-sided ones), mode
@@ -496,6 +504,9 @@ def generalization(data: EvalData, method: str) -> dict[str, Any]:
             **t.as_dict(),
             "one_sided": o.as_dict(),
             "mode_changes_per_min": _f(mode_changes(trace["mode"]) / minutes),
+            "mode_changes_after_startup_per_min": _f(
+                mode_changes_after_startup(trace["mode"]) / minutes
+            ),
             "textured_share": _f(textured),
             "conditions": [c.kind for c in scen.conditions],
             "size": [scen.camera.width, scen.camera.height],
