@@ -28,6 +28,7 @@ from roadpreview.canbus import (
     AlertEncoder,
     ConfirmEncoder,
     OutputDecoder,
+    OutputEncoders,
     ReceivedAlert,
     ReceivedAlertDetail,
     ReceivedConfirm,
@@ -463,8 +464,7 @@ def test_enum_values_on_can_match_the_code(strict_db: Database) -> None:
 
 
 def test_e2e_counters_advance_and_crcs_check_with_autosar_e2e(strict_db: Database) -> None:
-    enc = AlertEncoder()
-    frames = alert_frames(_random_alerts(40), enc)
+    frames = alert_frames(_random_alerts(40), OutputEncoders())
     alerts = [f for f in frames if f.arbitration_id == 0x200]
     details = [f for f in frames if f.arbitration_id == 0x203]
     assert len(alerts) == len(details) == 40

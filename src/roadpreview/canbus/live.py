@@ -36,13 +36,10 @@ from cantools.database.can import Database
 from roadpreview.anomaly.alert import Alert
 from roadpreview.anomaly.confirm import ConfirmationResult
 from roadpreview.canbus.output import (
-    AlertDetailEncoder,
-    AlertEncoder,
-    ConfirmEncoder,
+    OutputEncoders,
     RoadStatusEncoder,
     Status,
     StatusEncoder,
-    detector_code,
 )
 from roadpreview.errors import ConfigError, MissingDependencyError, OperationError
 
@@ -204,13 +201,7 @@ class CanOutput:
         detector: str = "two-axle",
     ) -> None:
         self.bus = bus
-        self.alerts = AlertEncoder(db)
-        self.details = AlertDetailEncoder(self.alerts.db)
-        self.confirms = ConfirmEncoder(self.alerts.db)
-        self.status = StatusEncoder(self.alerts.db)
-        self.road_status = RoadStatusEncoder(self.alerts.db)
-        detector_code(detector)  # an unknown name fails here, not at the first alert
-        self.detector = detector
+        self.encoders = OutputEncoders(db, detector=detector)
         self.keep_sent = keep_sent
         self.sent: list[can.Message] = []
         self.alerts_sent = 0
@@ -230,10 +221,7 @@ class CanOutput:
     def send_alert(self, alert: Alert, *, timestamp: float | None = None) -> list[can.Message]:
         """Encode and send one alert: its ``RP_ALERT`` frame, then its ``RP_ALERT_DETAIL``."""
         with self._lock:
-            frames = [
-                self.alerts.encode(alert, timestamp=timestamp),
-                self.details.encode(alert, self.detector, timestamp=timestamp),
-            ]
+            frames = self.encoders.alert_frames(alert, timestamp=timestamp)
             self.alerts_sent += 1
         return [self._send(m) for m in frames]
 
@@ -247,19 +235,19 @@ class CanOutput:
         """Encode and send one ``RP_CONFIRM`` frame (``precision``: the running precision
         after ``result``, 0..1; None: not available)."""
         with self._lock:
-            msg = self.confirms.encode(result, precision, timestamp=timestamp)
+            msg = self.encoders.confirm.encode(result, precision, timestamp=timestamp)
         return self._send(msg)
 
     def send_status(self, status: Status, *, timestamp: float = 0.0) -> can.Message:
         """Encode and send one ``RP_STATUS`` frame now."""
         with self._lock:
-            msg = self.status.encode(status, timestamp=timestamp)
+            msg = self.encoders.status.encode(status, timestamp=timestamp)
         return self._send(msg)
 
     def send_road_status(self, status: Status, *, timestamp: float = 0.0) -> can.Message:
         """Encode and send one ``RP_ROAD_STATUS`` frame now."""
         with self._lock:
-            msg = self.road_status.encode(status, timestamp=timestamp)
+            msg = self.encoders.road.encode(status, timestamp=timestamp)
         return self._send(msg)
 
     def update_status(self, status: Status) -> None:
@@ -290,7 +278,7 @@ class CanOutput:
             raise OperationError("the periodic status is already running")
         self._latest = status
         try:
-            for encoder in (self.status, self.road_status):
+            for encoder in (self.encoders.status, self.encoders.road):
                 message = encoder.message
                 # a template: python-can calls the modifier before every send, the first included
                 template = can.Message(

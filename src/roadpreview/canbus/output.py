@@ -273,6 +273,36 @@ class RoadStatusEncoder(_ProtectedEncoder):
         return self._frame(self.values(status), float(timestamp))
 
 
+class OutputEncoders:
+    """roadpreview's output messages, encoded from one database for one detector: what a
+    run sends per alert (RP_ALERT, then RP_ALERT_DETAIL), per confirmation (RP_CONFIRM)
+    and periodically (RP_STATUS, RP_ROAD_STATUS). Shared by the live sender and the
+    replay's log so that both send the same frames in the same order."""
+
+    def __init__(self, db: Database | None = None, *, detector: str = "two-axle") -> None:
+        detector_code(detector)  # an unknown name fails here, not at the first alert
+        self.detector = detector
+        self.alert = AlertEncoder(db)
+        self.detail = AlertDetailEncoder(self.alert.db)
+        self.confirm = ConfirmEncoder(self.alert.db)
+        self.status = StatusEncoder(self.alert.db)
+        self.road = RoadStatusEncoder(self.alert.db)
+
+    def alert_frames(self, alert: Alert, *, timestamp: float | None = None) -> list[can.Message]:
+        """One alert's frames: its ``RP_ALERT``, then its ``RP_ALERT_DETAIL``."""
+        return [
+            self.alert.encode(alert, timestamp=timestamp),
+            self.detail.encode(alert, self.detector, timestamp=timestamp),
+        ]
+
+    def status_frames(self, status: Status, *, timestamp: float = 0.0) -> list[can.Message]:
+        """The periodic frames: ``RP_STATUS``, then ``RP_ROAD_STATUS``."""
+        return [
+            self.status.encode(status, timestamp=timestamp),
+            self.road.encode(status, timestamp=timestamp),
+        ]
+
+
 def detector_code(detector: str) -> int:
     """The ``DetailDetector`` code of a detector name; `ConfigError` for a name without one."""
     code = DETECTOR_CODES.get(detector)
@@ -302,19 +332,15 @@ def _gd_db(gd_n0_m3: float) -> float | None:
 
 def alert_frames(
     alerts: Iterable[Alert],
-    encoder: AlertEncoder | None = None,
-    detail_encoder: AlertDetailEncoder | None = None,
+    encoders: OutputEncoders | None = None,
     *,
     detector: str = "two-axle",
 ) -> list[can.Message]:
     """``RP_ALERT`` + ``RP_ALERT_DETAIL`` frames of ``alerts`` (two per alert, in that order)
-    at their emission times (for `write_can_log`); ``detector``: ``anomaly.detector``."""
-    enc = encoder or AlertEncoder()
-    detail = detail_encoder or AlertDetailEncoder(enc.db)
-    out: list[can.Message] = []
-    for a in alerts:
-        out += [enc.encode(a), detail.encode(a, detector)]
-    return out
+    at their emission times (for `write_can_log`); ``detector``: ``anomaly.detector``
+    (when no ``encoders`` are given)."""
+    enc = encoders or OutputEncoders(detector=detector)
+    return [m for a in alerts for m in enc.alert_frames(a)]
 
 
 # --- receiving ---------------------------------------------------------------------------------

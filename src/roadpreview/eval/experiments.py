@@ -474,12 +474,11 @@ def windowed_std(t: Array, y: Array, window_s: float, detrend: bool) -> Array:
     return out
 
 
-def ceiling_s(truth: Mapping[str, Array], f_px: float, window_s: float, detrend: bool) -> Array:
-    """s(t) of the *true* compensated trajectory: the rendered row of the lead's rear
-    centre (``lead_rear_px``) less the camera's true pitch, f tan(phi), and heave,
-    f dz / d (dz: the camera height less its centred `CEILING_HEAVE_SPAN_S` mean; d the
-    true lead distance). What a method with perfect tracking, pitch and heave would see:
-    the data set's ceiling, not a method."""
+def true_compensated_y(truth: Mapping[str, Array], f_px: float) -> tuple[Array, Array, Array]:
+    """Frame times, the *true* compensated row y_c (px) and the true lead distance (m): the
+    rendered row of the lead's rear centre (``lead_rear_px``) less the camera's true pitch,
+    f tan(phi), and heave, f dz / d (dz: the camera height less its centred
+    `CEILING_HEAVE_SPAN_S` mean)."""
     t = np.asarray(truth["frame_t_s"], dtype=np.float64)
     y = np.asarray(truth["lead_rear_px"], dtype=np.float64)[:, 1]
     z = np.asarray(truth["cam_z_m"], dtype=np.float64)
@@ -488,21 +487,21 @@ def ceiling_s(truth: Mapping[str, Array], f_px: float, window_s: float, detrend:
     mean = np.convolve(np.pad(z, (k // 2, k // 2), mode="edge"), np.ones(k) / k, mode="valid")
     with np.errstate(invalid="ignore", divide="ignore"):
         yc = y - f_px * np.tan(np.asarray(truth["cam_pitch_rad"])) - f_px * (z - mean) / d
+    return t, yc, d
+
+
+def ceiling_s(truth: Mapping[str, Array], f_px: float, window_s: float, detrend: bool) -> Array:
+    """s(t) of the *true* compensated trajectory (`true_compensated_y`): what a method with
+    perfect tracking, pitch and heave would see; the data set's ceiling, not a method."""
+    t, yc, _ = true_compensated_y(truth, f_px)
     return windowed_std(t, yc, window_s, detrend)
 
 
 def true_trajectory(truth: Mapping[str, Array], f_px: float) -> list[TrajectorySample]:
     """The *true* compensated trajectory as detector input: the rendered row of the lead's
-    rear centre less the camera's true pitch and heave (`ceiling_s`), with the true
+    rear centre less the camera's true pitch and heave (`true_compensated_y`), with the true
     distance and ego speed; no halves (the truth has none)."""
-    t = np.asarray(truth["frame_t_s"], dtype=np.float64)
-    y = np.asarray(truth["lead_rear_px"], dtype=np.float64)[:, 1]
-    z = np.asarray(truth["cam_z_m"], dtype=np.float64)
-    d = np.asarray(truth["lead_distance_m"], dtype=np.float64)
-    k = max(1, round(CEILING_HEAVE_SPAN_S / float(np.median(np.diff(t)))) | 1)
-    mean = np.convolve(np.pad(z, (k // 2, k // 2), mode="edge"), np.ones(k) / k, mode="valid")
-    with np.errstate(invalid="ignore", divide="ignore"):
-        yc = y - f_px * np.tan(np.asarray(truth["cam_pitch_rad"])) - f_px * (z - mean) / d
+    t, yc, d = true_compensated_y(truth, f_px)
     v = np.asarray(truth["ego_speed_m_s"], dtype=np.float64)
     return [
         TrajectorySample(

@@ -18,15 +18,7 @@ import numpy as np
 from roadpreview.anomaly.alert import Alert
 from roadpreview.anomaly.confirm import ConfirmationResult
 from roadpreview.canbus import write_can_log
-from roadpreview.canbus.output import (
-    AlertDetailEncoder,
-    AlertEncoder,
-    ConfirmEncoder,
-    RoadStatusEncoder,
-    Status,
-    StatusEncoder,
-    detector_code,
-)
+from roadpreview.canbus.output import OutputEncoders, Status
 from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.core import FrameResult
 
@@ -71,16 +63,14 @@ class CanOutputLog:
     ``period_s``. ``detector`` (``anomaly.detector``) goes into RP_ALERT_DETAIL."""
 
     def __init__(self, period_s: float = 0.1, *, detector: str = "two-axle") -> None:
-        detector_code(detector)  # an unknown name fails here, not at the first alert
         self.period_s = period_s
-        self.detector = detector
-        self._alerts = AlertEncoder()
-        self._details = AlertDetailEncoder()
-        self._confirms = ConfirmEncoder()
-        self._status = StatusEncoder()
-        self._road = RoadStatusEncoder()
+        self._enc = OutputEncoders(detector=detector)
         self.messages: list[can.Message] = []
         self._next_status = -math.inf
+
+    @property
+    def detector(self) -> str:
+        return self._enc.detector
 
     def frame(
         self,
@@ -93,13 +83,11 @@ class CanOutputLog:
         ``.confirmations``) and the status after it (``Pipeline.status()``; its precision
         goes into each RP_CONFIRM)."""
         for a in alerts:
-            self.messages.append(self._alerts.encode(a, timestamp=t))
-            self.messages.append(self._details.encode(a, self.detector, timestamp=t))
+            self.messages += self._enc.alert_frames(a, timestamp=t)
         for c in confirmations:
-            self.messages.append(self._confirms.encode(c, status.precision, timestamp=t))
+            self.messages.append(self._enc.confirm.encode(c, status.precision, timestamp=t))
         if t >= self._next_status:
-            self.messages.append(self._status.encode(status, timestamp=t))
-            self.messages.append(self._road.encode(status, timestamp=t))
+            self.messages += self._enc.status_frames(status, timestamp=t)
             self._next_status = t + self.period_s
 
     def write(self, path: Path) -> int:
