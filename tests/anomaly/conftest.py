@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from roadpreview.anomaly import TrajectorySample
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.types import FusionMode
 
 
 def trajectory(

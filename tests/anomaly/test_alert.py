@@ -13,13 +13,11 @@ from roadpreview.anomaly import (
     AlertConfig,
     AnomalyEvent,
     DetectorConfig,
-    Side,
     SignalModel,
-    SuppressionReason,
     WindowedStdDetector,
 )
 from roadpreview.errors import ConfigError
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.types import FusionMode, Side, SuppressionReason
 
 
 def _event(**changes: Any) -> AnomalyEvent:

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from roadpreview.anomaly import Side
-from roadpreview.anomaly.confirm import Confirmation, ConfirmConfig, EgoConfirmer
+from roadpreview.anomaly.confirm import ConfirmConfig, EgoConfirmer
+from roadpreview.types import Confirmation, Side
 
 
 def _drive(

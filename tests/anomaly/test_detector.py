@@ -13,16 +13,14 @@ import pytest
 from roadpreview.anomaly import (
     AnomalyConfig,
     DetectorConfig,
-    Side,
     SignalModel,
-    SuppressionReason,
     TrajectorySample,
     WindowedStdDetector,
     noise_threshold_px,
 )
 from roadpreview.configtools import load, save
 from roadpreview.errors import ConfigError, InputDataError
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.types import FusionMode, Side, SuppressionReason
 
 #: the paper's s (eq. 1): the plain std of the window, no detrending
 PAPER = DetectorConfig(detrend=False, emit="peak")

@@ -11,14 +11,13 @@ import pytest
 
 from roadpreview.anomaly import (
     DetectorConfig,
-    SuppressionReason,
     TrajectorySample,
     WindowedMoments,
     WindowedStdDetector,
     noise_threshold_px,
 )
 from roadpreview.errors import ConfigError
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.types import FusionMode, SuppressionReason
 
 FPS = 30.0
 

@@ -7,10 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from roadpreview.anomaly.roughness import RoadRoughness, RoadState, RoughnessConfig, iso8608_class
+from roadpreview.anomaly.roughness import RoadRoughness, RoughnessConfig, iso8608_class
 from roadpreview.ego.vertical import EgoVerticalMonitor
 from roadpreview.sim.road import RoadConfig, generate_road
 from roadpreview.sim.vehicle import VehicleParams, simulate_vehicle
+from roadpreview.types import RoadState
 
 
 def test_class_boundaries_are_iso_8608() -> None:

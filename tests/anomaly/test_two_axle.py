@@ -9,9 +9,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from roadpreview.anomaly import Side, TrajectorySample, TwoAxleConfig
+from roadpreview.anomaly import TrajectorySample, TwoAxleConfig
 from roadpreview.anomaly.response import NominalVehicle, TemplateBank
 from roadpreview.anomaly.two_axle import TwoAxleDetector
+from roadpreview.types import Side
 
 VEH = NominalVehicle()
 

@@ -16,8 +16,6 @@ from roadpreview.canbus import (
     QUANTITIES,
     CanInputDecoder,
     FrameProblem,
-    ImuSample,
-    SpeedSample,
     available_mappings,
     decode_log,
     encode_protected,
@@ -30,6 +28,7 @@ from roadpreview.canbus.mapping import parse_mapping, replace_quantity
 from roadpreview.errors import ConfigError
 from roadpreview.sim.canlog import imu_to_messages, speed_to_messages
 from roadpreview.sim.imu import DEG, ImuConfig, SpeedSensorConfig, simulate_imu, simulate_speed
+from roadpreview.types import ImuSample, SpeedSample
 
 FILES = Path(__file__).resolve().parents[1] / "files"
 

@@ -12,9 +12,6 @@ from typing import TypeVar
 import can
 import pytest
 
-from roadpreview.anomaly import Alert, Side, SuppressionReason
-from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult
-from roadpreview.anomaly.roughness import RoadState
 from roadpreview.canbus import (
     BoundedQueueListener,
     CanInputDecoder,
@@ -27,7 +24,6 @@ from roadpreview.canbus import (
     ReceivedOutput,
     ReceivedRoadStatus,
     ReceivedStatus,
-    Status,
     decode_log,
     load_database,
     load_mapping,
@@ -37,7 +33,16 @@ from roadpreview.canbus import (
     write_can_log,
 )
 from roadpreview.errors import ConfigError
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.types import (
+    Alert,
+    Confirmation,
+    ConfirmationResult,
+    FusionMode,
+    RoadState,
+    Side,
+    Status,
+    SuppressionReason,
+)
 
 T = TypeVar("T")
 

@@ -13,9 +13,7 @@ import numpy as np
 import pytest
 from cantools.database.can import Database
 
-from roadpreview.anomaly import Alert, Side, SuppressionReason
-from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult
-from roadpreview.anomaly.roughness import ISO8608_CLASSES, ISO8608_GD_N0, RoadState
+from roadpreview.anomaly.roughness import ISO8608_GD_N0
 from roadpreview.canbus import (
     DETECTOR_CODES,
     E2E_COUNTER_MODULUS,
@@ -35,14 +33,23 @@ from roadpreview.canbus import (
     ReceivedRoadStatus,
     ReceivedStatus,
     RoadStatusEncoder,
-    Status,
     StatusEncoder,
     alert_frames,
     read_can_log,
     write_can_log,
 )
 from roadpreview.errors import ConfigError
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.types import (
+    ISO8608_CLASSES,
+    Alert,
+    Confirmation,
+    ConfirmationResult,
+    FusionMode,
+    RoadState,
+    Side,
+    Status,
+    SuppressionReason,
+)
 
 REPO_DBC = Path(__file__).resolve().parents[2] / "data" / "roadpreview.dbc"
 DEG = math.pi / 180

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from roadpreview.eval.product import mode_changes, mode_changes_after_startup
-from roadpreview.fusion import FusionMode
+from roadpreview.types import FusionMode
 
 F, V, IMU, D = (
     int(FusionMode.FUSED),

@@ -30,10 +30,10 @@ from roadpreview.eval.runner import (
     process_recording,
     run_methods,
 )
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.sim.dataset import clips_of_recording
 from roadpreview.sim.presets import controlled
+from roadpreview.types import FusionMode
 
 
 # -- clip scores ---------------------------------------------------------------------------------

@@ -35,9 +35,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from roadpreview.fusion import FusionMode, PitchFusion, VisualPitch
+from roadpreview.fusion import PitchFusion, VisualPitch
 from roadpreview.sim.canlog import read_imu_csv
 from roadpreview.sim.recording import Recording
+from roadpreview.types import FusionMode
 
 DEG = math.pi / 180.0
 FOG_LIMIT_PER_M = 0.03

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from roadpreview.errors import ConfigError
-from roadpreview.fusion import BACKENDS, FusionMode, PitchFusion, make_fusion
+from roadpreview.fusion import BACKENDS, PitchFusion, make_fusion
 from roadpreview.fusion.config import FactorGraphConfig
+from roadpreview.types import FusionMode
 
 DEG = math.pi / 180.0
 

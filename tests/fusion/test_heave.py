@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from roadpreview.canbus.samples import ImuSample
 from roadpreview.errors import ConfigError
 from roadpreview.fusion.compensation import compensation, heave_term_px
 from roadpreview.fusion.heave import HeaveConfig, HeaveEstimate, HeaveObserver, HeaveTerm
+from roadpreview.types import ImuSample
 
 G = 9.80665
 NAN3 = (math.nan, math.nan, math.nan)

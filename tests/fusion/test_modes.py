@@ -8,9 +8,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from roadpreview.fusion import FusionMode, VisualPitch, make_fusion
+from roadpreview.fusion import VisualPitch, make_fusion
 from roadpreview.fusion.config import ModeConfig
 from roadpreview.fusion.modes import ModeSupervisor, VisionTrust
+from roadpreview.types import FusionMode
 
 DEG = math.pi / 180.0
 FUSED, VISUAL_ONLY = int(FusionMode.FUSED), int(FusionMode.VISUAL_ONLY)

@@ -14,7 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from roadpreview.fusion import FusionMode, make_fusion
+from roadpreview.fusion import make_fusion
+from roadpreview.types import FusionMode
 
 DEG = math.pi / 180.0
 FUSED, IMU_ONLY = int(FusionMode.FUSED), int(FusionMode.IMU_ONLY)

@@ -27,10 +27,10 @@ from roadpreview.canbus.output import (
     ReceivedRoadStatus,
     ReceivedStatus,
 )
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline import PipelineConfig
 from roadpreview.pipeline.daemon import Daemon, DaemonOptions, DaemonSummary
 from roadpreview.pipeline.replay import ReplayInputs, replay
+from roadpreview.types import FusionMode
 
 START_DELAY_S = 1.0  # the daemon's threads and the feeder start before frame 0 is due
 

@@ -26,10 +26,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from roadpreview.fusion import FusionMode
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.replay import ReplayInputs, ReplayResult, replay
 from roadpreview.sim.presets import demo
+from roadpreview.types import FusionMode
 
 
 @pytest.fixture(scope="module")

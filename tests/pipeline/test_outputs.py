@@ -13,9 +13,6 @@ import e2e.p01
 import pytest
 from cantools.database.can import Database
 
-from roadpreview.anomaly import Alert, Side
-from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult
-from roadpreview.anomaly.roughness import RoadState
 from roadpreview.canbus import (
     OutputDecoder,
     ReceivedAlert,
@@ -23,12 +20,19 @@ from roadpreview.canbus import (
     ReceivedConfirm,
     ReceivedRoadStatus,
     ReceivedStatus,
-    Status,
     read_can_log,
 )
 from roadpreview.errors import ConfigError
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.outputs import CanOutputLog
+from roadpreview.types import (
+    Alert,
+    Confirmation,
+    ConfirmationResult,
+    FusionMode,
+    RoadState,
+    Side,
+    Status,
+)
 
 REPO_DBC = Path(__file__).resolve().parents[2] / "data" / "roadpreview.dbc"
 T0 = 1.7e9  # Unix time, as the replay stamps frames

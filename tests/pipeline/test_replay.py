@@ -21,9 +21,9 @@ from roadpreview.canbus.output import (
 )
 from roadpreview.cli.main import main
 from roadpreview.errors import ConfigError, InputDataError
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline import Pipeline, PipelineConfig
 from roadpreview.pipeline.replay import ReplayInputs, replay
+from roadpreview.types import FusionMode
 
 
 @pytest.fixture(scope="module")

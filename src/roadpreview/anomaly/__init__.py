@@ -6,15 +6,8 @@ from __future__ import annotations
 import importlib
 from dataclasses import replace
 
-from roadpreview.anomaly.alert import Alert, AlertBuilder
-from roadpreview.anomaly.base import (
-    AnomalyEvent,
-    Detector,
-    DetectorFrame,
-    Side,
-    SuppressionReason,
-    TrajectorySample,
-)
+from roadpreview.anomaly.alert import AlertBuilder
+from roadpreview.anomaly.base import AnomalyEvent, Detector, DetectorFrame, TrajectorySample
 from roadpreview.anomaly.config import (
     DETECTORS,
     AlertConfig,
@@ -28,6 +21,7 @@ from roadpreview.anomaly.nms import PeakPicker
 from roadpreview.anomaly.running import WindowedMoments
 from roadpreview.anomaly.windowed_std import DetectorRun, WindowedStdDetector, classify_side
 from roadpreview.errors import ConfigError
+from roadpreview.types import Alert, Side, SuppressionReason
 
 
 def make_detector(config: AnomalyConfig, focal_px: float | None = None) -> Detector:

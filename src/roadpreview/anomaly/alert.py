@@ -12,51 +12,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
 
-from roadpreview.anomaly.base import AnomalyEvent, Side
+from roadpreview.anomaly.base import AnomalyEvent
 from roadpreview.anomaly.config import AlertConfig, SignalModel
 from roadpreview.configtools import check_ranges
-from roadpreview.fusion.mode import FusionMode
-
-
-@dataclass(frozen=True, slots=True)
-class Alert:
-    """A predictive alert about one road anomaly ahead.
-
-    Times are on the pipeline's clock. The anomaly is ``distance_m`` ahead of
-    the ego at ``t_s`` and reached at ``t_s + time_to_arrival_s`` if the speed
-    stays the same; the alert exists from ``t_emit_s`` on (detection delay
-    ``t_emit_s - t_s``). None: unknown.
-    """
-
-    t_s: float  #: when the lead crossed the anomaly, s
-    t_emit_s: float  #: when the detector confirmed it, s
-    distance_m: float | None  #: distance from the ego camera to the anomaly at t_s, m
-    time_to_arrival_s: float | None  #: until the ego's front axle is there, from t_s, s
-    severity_px: float  #: the detector's score (std: peak s in px; two-axle: background stds)
-    #: estimated anomaly height, mm: signed (bump +, pothole -) from the two-axle
-    #: detector's inverse model; the std detector's α f δ / d model gives a magnitude
-    height_mm: float | None
-    side: Side  #: left / right / both / unknown
-    #: probability that the anomaly is real (two-axle: calibrated on the evaluation's
-    #: training folds); the std detector's is a heuristic (docs/detector.md)
-    confidence: float
-    mode: FusionMode  #: fusion mode at the crossing
-    alert_id: int = 0  #: sequence number of the alert since start (CAN: modulo 256)
-    height_std_mm: float | None = None  #: std of ``height_mm`` (None: unknown)
-    length_m: float | None = None  #: estimated length along the road (None: not resolved)
-    lead_speed_mps: float | None = None  #: the lead's speed when it crossed, m/s
-
-    @property
-    def arrival_t_s(self) -> float | None:
-        """Predicted time the ego reaches the anomaly (None if unknown)."""
-        return None if self.time_to_arrival_s is None else self.t_s + self.time_to_arrival_s
-
-    def time_left_s(self, now_s: float) -> float | None:
-        """Time until the ego reaches the anomaly, seen at ``now_s`` (None if unknown)."""
-        arrival = self.arrival_t_s
-        return None if arrival is None else arrival - now_s
+from roadpreview.types import Alert
 
 
 class AlertBuilder:

@@ -11,40 +11,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import IntEnum, IntFlag
 from typing import Protocol
 
-from roadpreview.fusion.mode import FusionMode
-
-
-class Side(IntEnum):
-    """Which half of the lead vehicle the anomaly moved; the integer goes on CAN.
-
-    Seen from behind, the left half of the lead's image is the lead's (and the
-    ego's) left side.
-    """
-
-    #: the half-vehicle trajectories were not available
-    UNKNOWN = 0
-    #: under the left wheels only (for example a pothole)
-    LEFT = 1
-    #: under the right wheels only
-    RIGHT = 2
-    #: full width (for example a speed bump)
-    BOTH = 3
-
-
-class SuppressionReason(IntFlag):
-    """Why alerts are held back at a frame; falsy when they are not. Bits go on CAN."""
-
-    NONE = 0
-    #: the lead brakes or accelerates hard: its pitch is longitudinal dynamics, not the road
-    LEAD_ACCEL = 1
-    #: the fusion is DEGRADED: the trajectory is not compensated for the ego pitch
-    DEGRADED = 2
-    #: the fusion is IMU_ONLY before it has been FUSED long enough to know the gyro bias:
-    #: the integrated pitch drifts
-    SETTLING = 4
+from roadpreview.types import FusionMode, Side, SuppressionReason
 
 
 @dataclass(frozen=True, slots=True)

@@ -26,20 +26,11 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from enum import IntEnum
 
 import numpy as np
 
-from roadpreview.anomaly.base import Side
 from roadpreview.configtools import check_ranges, param
-
-
-class Confirmation(IntEnum):
-    """What the ego felt at an alerted spot; the integer goes on CAN."""
-
-    UNKNOWN = 0
-    CONFIRMED = 1
-    NOT_FELT = 2
+from roadpreview.types import Confirmation, ConfirmationResult, Side
 
 
 @dataclass(frozen=True)
@@ -96,18 +87,6 @@ class ConfirmConfig:
     precision_window: int = param(
         20, ge=1, le=10_000, help="resolved alerts the online precision is taken over"
     )
-
-
-@dataclass(frozen=True, slots=True)
-class ConfirmationResult:
-    """The outcome for one alert."""
-
-    alert_id: int  #: the alert's id
-    outcome: Confirmation
-    t_s: float  #: when it was decided (the window's end), s
-    t_arrival_s: float  #: when the ego's front axle reached the spot (NaN: never), s
-    peak_mps2: float  #: largest band-passed vertical acceleration in the window (NaN: none)
-    background_mps2: float  #: the ego's background peak level then (NaN: none)
 
 
 @dataclass

@@ -43,11 +43,11 @@ from numpy.typing import NDArray
 
 from roadpreview.anomaly.response import ISO8608_N0, NominalVehicle
 from roadpreview.configtools import check_ranges, param
+from roadpreview.types import ISO8608_CLASSES, RoadState
 
 FloatArray = NDArray[np.float64]
 
 #: ISO 8608 classes and the geometric mean G_d(n0) of each (m³)
-ISO8608_CLASSES = ("A", "B", "C", "D", "E", "F", "G", "H")
 ISO8608_GD_N0 = {c: 16e-6 * 4.0**i for i, c in enumerate(ISO8608_CLASSES)}
 
 
@@ -94,23 +94,6 @@ class RoughnessConfig:
     tracking_noise_px: float = param(
         0.15, unit="px", ge=0.0, le=10.0, help="tracking noise taken off the lead's blocks"
     )
-
-
-@dataclass(frozen=True, slots=True)
-class RoadState:
-    """The road's roughness now; None / NaN: unknown."""
-
-    iso_class: str | None = None  #: the reported class (ego's, else lead's)
-    gd_n0: float = math.nan  #: its G_d(n0), m³
-    ego_class: str | None = None  #: from the ego's vertical acceleration
-    ego_gd_n0: float = math.nan
-    lead_class: str | None = None  #: from the lead's motion (the road ahead)
-    lead_gd_n0: float = math.nan
-
-    @property
-    def class_index(self) -> int:
-        """0 unknown, 1 = A .. 8 = H (the CAN encoding)."""
-        return 0 if self.iso_class is None else ISO8608_CLASSES.index(self.iso_class) + 1
 
 
 @lru_cache(maxsize=256)

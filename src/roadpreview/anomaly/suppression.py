@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import math
 
-from roadpreview.anomaly.base import SuppressionReason, TrajectorySample
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.anomaly.base import TrajectorySample
+from roadpreview.types import FusionMode, SuppressionReason
 
 
 class SuppressionTracker:

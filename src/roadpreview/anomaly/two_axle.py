@@ -56,19 +56,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, signal
 
-from roadpreview.anomaly.base import (
-    AnomalyEvent,
-    DetectorFrame,
-    Side,
-    SuppressionReason,
-    TrajectorySample,
-)
+from roadpreview.anomaly.base import AnomalyEvent, DetectorFrame, TrajectorySample
 from roadpreview.anomaly.config import TwoAxleConfig
 from roadpreview.anomaly.response import TemplateBank
 from roadpreview.anomaly.suppression import SuppressionTracker
 from roadpreview.configtools import check_ranges
 from roadpreview.errors import InputDataError
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.types import FusionMode, Side, SuppressionReason
 
 FloatArray = NDArray[np.float64]
 

@@ -24,20 +24,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from roadpreview.anomaly.base import (
-    AnomalyEvent,
-    DetectorFrame,
-    Side,
-    SuppressionReason,
-    TrajectorySample,
-)
+from roadpreview.anomaly.base import AnomalyEvent, DetectorFrame, TrajectorySample
 from roadpreview.anomaly.config import DetectorConfig
 from roadpreview.anomaly.nms import OnsetPicker, PeakPicker
 from roadpreview.anomaly.running import WindowedMoments
 from roadpreview.anomaly.suppression import SuppressionTracker
 from roadpreview.configtools import check_ranges
 from roadpreview.errors import InputDataError
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.types import FusionMode, Side, SuppressionReason
 
 FloatArray = NDArray[np.float64]
 

@@ -57,12 +57,11 @@ from roadpreview.canbus.output import (
     ReceivedRoadStatus,
     ReceivedStatus,
     RoadStatusEncoder,
-    Status,
     StatusEncoder,
     alert_frames,
     detector_code,
 )
-from roadpreview.canbus.samples import ImuSample, InputSample, SpeedSample
+from roadpreview.types import ImuSample, InputSample, SpeedSample, Status
 
 __all__ = [
     "DETECTOR_CODES",

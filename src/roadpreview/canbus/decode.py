@@ -31,8 +31,8 @@ from cantools.database.namedsignalvalue import NamedSignalValue
 from roadpreview.canbus.dbc import E2E_COUNTER_MODULUS, E2ELayout, e2e_layout
 from roadpreview.canbus.logio import CanLogReader, channel_number
 from roadpreview.canbus.mapping import BoundMapping, BoundQuantity, InputMapping, bind_mapping
-from roadpreview.canbus.samples import ImuSample, InputSample, SpeedSample
 from roadpreview.errors import ConfigError, InputDataError
+from roadpreview.types import ImuSample, InputSample, SpeedSample
 
 log = logging.getLogger(__name__)
 

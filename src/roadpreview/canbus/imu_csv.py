@@ -22,8 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from roadpreview.canbus.samples import RATE_SIGNS, ImuMeasurements, ImuSample
+from roadpreview.canbus.samples import RATE_SIGNS, ImuMeasurements
 from roadpreview.errors import InputDataError
+from roadpreview.types import ImuSample
 
 log = logging.getLogger(__name__)
 

@@ -33,15 +33,9 @@ from typing import Any
 import can
 from cantools.database.can import Database
 
-from roadpreview.anomaly.alert import Alert
-from roadpreview.anomaly.confirm import ConfirmationResult
-from roadpreview.canbus.output import (
-    OutputEncoders,
-    RoadStatusEncoder,
-    Status,
-    StatusEncoder,
-)
+from roadpreview.canbus.output import OutputEncoders, RoadStatusEncoder, StatusEncoder
 from roadpreview.errors import ConfigError, MissingDependencyError, OperationError
+from roadpreview.types import Alert, ConfirmationResult, Status
 
 log = logging.getLogger(__name__)
 

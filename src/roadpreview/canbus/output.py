@@ -28,10 +28,6 @@ from cantools.database.can import Database
 from cantools.database.can import Message as MessageDef
 from cantools.database.namedsignalvalue import NamedSignalValue
 
-from roadpreview.anomaly.alert import Alert
-from roadpreview.anomaly.base import Side, SuppressionReason
-from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult
-from roadpreview.anomaly.roughness import ISO8608_CLASSES, RoadState
 from roadpreview.canbus.dbc import (
     E2E_COUNTER_MODULUS,
     RP_ALERT,
@@ -45,7 +41,17 @@ from roadpreview.canbus.dbc import (
 )
 from roadpreview.canbus.decode import signal_values
 from roadpreview.errors import ConfigError, InputDataError
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.types import (
+    ISO8608_CLASSES,
+    Alert,
+    Confirmation,
+    ConfirmationResult,
+    FusionMode,
+    RoadState,
+    Side,
+    Status,
+    SuppressionReason,
+)
 
 log = logging.getLogger(__name__)
 
@@ -56,27 +62,6 @@ _KMH = 1.0 / 3.6  #: m/s per km/h
 DETECTOR_CODES = {"std": 0, "two-axle": 1}
 #: reference of the G_d(n0) levels on CAN: 10 log10(G_d(n0) / 1e-6 m³)
 GD_REF_M3 = 1e-6
-
-
-@dataclass(frozen=True, slots=True)
-class Status:
-    """What ``RP_STATUS`` reports; None: not available."""
-
-    mode: FusionMode  #: current fusion mode
-    pitch_rad: float | None = None  #: fused camera pitch, nose up +, rad
-    gyro_bias_rad_s: float | None = None  #: estimated gyro pitch-rate bias, rad/s
-    texture_quality: float | None = None  #: background texture quality, 0..1
-    time_offset_s: float | None = None  #: IMU stamp minus camera stamp, s
-    suppressed: SuppressionReason = SuppressionReason.NONE  #: why alerts are held back now
-    alerts_sent: int = 0  #: alerts sent since start
-    #: input frames dropped since start; the encoder sends the increase since its last frame
-    input_errors_total: int = 0
-    frames_processed: int = 0  #: camera frames processed since start
-    # --- carried by RP_ROAD_STATUS ---
-    road: RoadState | None = None  #: the road's roughness class estimate (None: unknown)
-    precision: float | None = None  #: running online precision of the checked alerts, 0..1
-    confirmed: int = 0  #: alerts the ego confirmed since start
-    not_felt: int = 0  #: alerts the ego did not feel since start
 
 
 class _ProtectedEncoder:

@@ -9,7 +9,6 @@ NaN: IMU rates and accelerations often come in separate messages.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,41 +22,6 @@ Array = NDArray[np.float64]
 RATE_SIGNS = np.array([1.0, -1.0, 1.0])
 
 
-@dataclass(frozen=True, slots=True)
-class ImuSample:
-    """Body rates and/or specific force at one time stamp (NaN: not in this sample)."""
-
-    t_s: float  #: time stamp (the frame's log / reception time), s
-    rates_rad_s: tuple[float, float, float]  #: (roll, pitch nose-up +, yaw left +), rad/s
-    accel_m_s2: tuple[float, float, float]  #: specific force (x fwd, y left, z up), m/s²
-    source: str = ""  #: message (or file) the sample came from
-
-    @property
-    def pitch_rate_rad_s(self) -> float:
-        """Pitch rate, nose up positive (NaN if not in this sample)."""
-        return self.rates_rad_s[1]
-
-    @property
-    def has_rates(self) -> bool:
-        """True if at least one rate is present."""
-        return any(not math.isnan(r) for r in self.rates_rad_s)
-
-    @property
-    def has_accel(self) -> bool:
-        """True if at least one acceleration is present."""
-        return any(not math.isnan(a) for a in self.accel_m_s2)
-
-
-@dataclass(frozen=True, slots=True)
-class SpeedSample:
-    """Vehicle speed over ground (magnitude) at one time stamp."""
-
-    t_s: float  #: time stamp, s
-    speed_mps: float  #: m/s (NaN: the sender flagged it not available)
-    source: str = ""  #: message the sample came from
-
-
-InputSample = ImuSample | SpeedSample
 
 
 @dataclass(frozen=True)

@@ -19,11 +19,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from roadpreview.anomaly import AlertBuilder, AnomalyConfig, make_detector
-from roadpreview.anomaly.alert import Alert
 from roadpreview.anomaly.base import AnomalyEvent
-from roadpreview.anomaly.confirm import ConfirmationResult, EgoConfirmer
+from roadpreview.anomaly.confirm import EgoConfirmer
 from roadpreview.anomaly.roughness import RoadRoughness
 from roadpreview.eval.runner import Trace
+from roadpreview.types import Alert, ConfirmationResult
 
 Array = NDArray[np.float64]
 

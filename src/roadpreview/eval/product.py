@@ -31,12 +31,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from roadpreview.anomaly.alert import Alert
-from roadpreview.anomaly.confirm import Confirmation
 from roadpreview.eval.clips import ClipTable
 from roadpreview.eval.metrics import auc
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.truthmatch import match_alerts
+from roadpreview.types import Alert, Confirmation, FusionMode
 
 if TYPE_CHECKING:
     from roadpreview.eval.experiments import EvalData

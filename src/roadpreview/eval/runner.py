@@ -41,9 +41,9 @@ from roadpreview.anomaly.base import TrajectorySample
 from roadpreview.configtools import to_mapping
 from roadpreview.errors import InputDataError, OperationError
 from roadpreview.eval.methods import REFERENCE_METHOD, MethodSpec, NanStdFallback, method_config
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.sim.scenario import ScenarioConfig
+from roadpreview.types import FusionMode
 
 log = logging.getLogger(__name__)
 

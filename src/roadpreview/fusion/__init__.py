@@ -15,8 +15,8 @@ from typing import Any
 
 from roadpreview.fusion.base import FusedPitch, PitchFusion, VisualPitch
 from roadpreview.fusion.compensation import compensation
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.registry import build
+from roadpreview.types import FusionMode
 
 #: config name -> (module, class, config class)
 BACKENDS: dict[str, tuple[str, str, str | None]] = {

@@ -22,8 +22,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any, Protocol, runtime_checkable
 
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.pitch.base import PitchEstimate
+from roadpreview.types import FusionMode
 
 
 def _slot_setters(cls: type) -> tuple[Callable[[Any, Any], None], ...]:

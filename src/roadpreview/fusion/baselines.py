@@ -9,7 +9,7 @@ from roadpreview.errors import InputDataError
 from roadpreview.fusion.base import FusedPitch, VisualPitch
 from roadpreview.fusion.config import ImuOnlyConfig, VisualOnlyConfig
 from roadpreview.fusion.gyro import GyroHistory, RejectCounter
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.types import FusionMode
 
 
 class _Clock:

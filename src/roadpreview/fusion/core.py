@@ -42,9 +42,9 @@ from roadpreview.errors import InputDataError
 from roadpreview.fusion.base import FusedPitch, VisualPitch
 from roadpreview.fusion.config import FusionConfig
 from roadpreview.fusion.gyro import GyroHistory, Motion, RejectCounter
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.fusion.modes import ModeSupervisor, VisionTrust
 from roadpreview.fusion.timesync import TimeOffsetEstimator
+from roadpreview.types import FusionMode
 
 log = logging.getLogger(__name__)
 

@@ -40,10 +40,10 @@ import math
 from collections import Counter, deque
 from dataclasses import dataclass
 
-from roadpreview.canbus.samples import ImuSample
 from roadpreview.configtools import check_ranges, param
 from roadpreview.errors import ConfigError
 from roadpreview.fusion.compensation import heave_term_px
+from roadpreview.types import ImuSample
 
 log = logging.getLogger(__name__)
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 from roadpreview.fusion.config import ModeConfig
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.types import FusionMode
 
 
 class VisionTrust(Enum):

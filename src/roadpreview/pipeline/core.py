@@ -27,22 +27,29 @@ import can
 import numpy as np
 
 from roadpreview.anomaly import AlertBuilder, TrajectorySample, make_detector
-from roadpreview.anomaly.alert import Alert
-from roadpreview.anomaly.base import AnomalyEvent, SuppressionReason
-from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult, EgoConfirmer
-from roadpreview.anomaly.roughness import RoadRoughness, RoadState
+from roadpreview.anomaly.base import AnomalyEvent
+from roadpreview.anomaly.confirm import EgoConfirmer
+from roadpreview.anomaly.roughness import RoadRoughness
 from roadpreview.camera import CameraModel
 from roadpreview.canbus import load_database
 from roadpreview.canbus.decode import CanInputDecoder
 from roadpreview.canbus.mapping import load_mapping
-from roadpreview.canbus.output import Status
-from roadpreview.canbus.samples import ImuSample, SpeedSample
 from roadpreview.ego.vertical import EgoVerticalMonitor
 from roadpreview.fusion import FusedPitch, VisualPitch, compensation, make_fusion
 from roadpreview.fusion.heave import HeaveObserver, HeaveTerm
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pitch import make_estimator
+from roadpreview.types import (
+    Alert,
+    Confirmation,
+    ConfirmationResult,
+    FusionMode,
+    ImuSample,
+    RoadState,
+    SpeedSample,
+    Status,
+    SuppressionReason,
+)
 from roadpreview.vision.frontend import FrameVision, VisionFrontEnd
 
 log = logging.getLogger(__name__)

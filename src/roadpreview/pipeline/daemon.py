@@ -59,14 +59,12 @@ from typing import Any
 import can
 import cv2
 
-from roadpreview.anomaly.alert import Alert
 from roadpreview.camera import CameraModel
 from roadpreview.canbus.live import CanOutput, CanReceiver, open_bus
-from roadpreview.canbus.output import Status
 from roadpreview.errors import InputDataError, OperationError
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.core import FrameResult, Pipeline
+from roadpreview.types import Alert, FusionMode, Status
 
 log = logging.getLogger(__name__)
 

@@ -15,12 +15,10 @@ import can
 import cv2
 import numpy as np
 
-from roadpreview.anomaly.alert import Alert
-from roadpreview.anomaly.confirm import ConfirmationResult
 from roadpreview.canbus import write_can_log
-from roadpreview.canbus.output import OutputEncoders, Status
-from roadpreview.fusion.mode import FusionMode
+from roadpreview.canbus.output import OutputEncoders
 from roadpreview.pipeline.core import FrameResult
+from roadpreview.types import Alert, ConfirmationResult, FusionMode, Status
 
 
 def alert_json(alert: Alert) -> dict[str, Any]:

@@ -20,13 +20,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from roadpreview.anomaly.alert import Alert
-from roadpreview.anomaly.confirm import Confirmation, ConfirmationResult
-from roadpreview.anomaly.roughness import RoadState
 from roadpreview.camera import CameraModel
 from roadpreview.canbus.imu_csv import imu_samples, read_imu_csv
 from roadpreview.errors import InputDataError
-from roadpreview.fusion.mode import FusionMode
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.core import FrameResult, Pipeline
 from roadpreview.pipeline.outputs import (
@@ -46,6 +42,7 @@ from roadpreview.pipeline.sources import (
     merge_streams,
 )
 from roadpreview.pipeline.truthmatch import MatchReport, match_alerts
+from roadpreview.types import Alert, Confirmation, ConfirmationResult, FusionMode, RoadState
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from roadpreview.anomaly.alert import Alert
+from roadpreview.types import Alert
 
 
 @dataclass(frozen=True)
