@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import time
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import TypeVar
+from types import SimpleNamespace
+from typing import TypeVar, cast
 
 import can
 import pytest
@@ -15,7 +16,6 @@ import pytest
 from roadpreview.canbus import (
     BoundedQueueListener,
     CanInputDecoder,
-    CanOutput,
     CanReceiver,
     OutputDecoder,
     ReceivedAlert,
@@ -30,11 +30,14 @@ from roadpreview.canbus import (
     open_bus,
     read_can_log,
     replay,
-    write_can_log,
 )
 from roadpreview.errors import ConfigError
+from roadpreview.loop import RunSummary
+from roadpreview.pipeline import FrameResult
+from roadpreview.sinks.can import CanBusSink
 from roadpreview.types import (
     Alert,
+    CameraFrame,
     Confirmation,
     ConfirmationResult,
     FusionMode,
@@ -76,8 +79,15 @@ def _of(kind: type[T], got: list[ReceivedOutput]) -> list[T]:
     return [g for g in got if isinstance(g, kind)]
 
 
+def _result(
+    t: float, alerts: Sequence[Alert] = (), confirms: Sequence[ConfirmationResult] = ()
+) -> FrameResult:
+    """The part of a `FrameResult` the CAN sinks read."""
+    return cast(FrameResult, SimpleNamespace(t=t, alerts=tuple(alerts), confirmations=confirms))
+
+
 def test_alerts_and_status_from_one_bus_object_to_another(
-    buses: tuple[can.BusABC, can.BusABC],
+    buses: tuple[can.BusABC, can.BusABC], tmp_path: Path
 ) -> None:
     tx, rx = buses
     alert = Alert(
@@ -122,13 +132,17 @@ def test_alerts_and_status_from_one_bus_object_to_another(
     def five_each(got: list[ReceivedOutput]) -> bool:
         return len(_of(ReceivedStatus, got)) >= 5 and len(_of(ReceivedRoadStatus, got)) >= 5
 
+    degraded = Status(mode=FusionMode.DEGRADED, frames_processed=124)
     with CanReceiver(rx) as receiver:
-        out = CanOutput(tx, keep_sent=True, detector="std")
-        sent = out.send_alert(alert)
-        out.send_confirmation(confirmation, 0.75)
-        out.start_status(status, period_s=0.01)
+        out = CanBusSink(tx, detector="std", record=tmp_path / "sent.asc")
+        # as the run loop drives it: the frame that emitted the alert, the one that decided
+        # the confirmation, the status every period
+        out.on_frame(CameraFrame(11.0, None), _result(11.0, alerts=[alert]), status)
+        out.on_frame(CameraFrame(14.0, None), _result(14.0, confirms=[confirmation]), status)
+        for k in range(5):
+            out.on_status(14.0 + 0.1 * k, status)
         got = _receive_until(receiver, decoder, five_each)
-        out.update_status(Status(mode=FusionMode.DEGRADED, frames_processed=124))
+        out.on_status(14.6, degraded)
         later = _receive_until(
             receiver,
             decoder,
@@ -137,8 +151,10 @@ def test_alerts_and_status_from_one_bus_object_to_another(
                 and any(r.iso_class is None for r in _of(ReceivedRoadStatus, g))
             ),
         )
-        out.stop()
-    assert [m.arbitration_id for m in sent] == [0x200, 0x203]  # RP_ALERT, then its details
+        out.close(RunSummary())
+    sent = list(read_can_log(tmp_path / "sent.asc"))
+    assert out.send_errors == 0
+    assert [m.arbitration_id for m in sent[:2]] == [0x200, 0x203]  # RP_ALERT, then details
     first, detail, confirm = got[:3]
     assert isinstance(first, ReceivedAlert)
     assert first.alert_id == 259 % 256
@@ -187,31 +203,45 @@ def test_alerts_and_status_from_one_bus_object_to_another(
     assert decoder.problems == {}
     assert decoder.lost == 0
     assert receiver.dropped == 0
-    assert [m.arbitration_id for m in out.sent[:3]] == [0x200, 0x203, 0x204]
-    assert {m.arbitration_id for m in out.sent[3:]} == {0x201, 0x202}
+    assert [m.arbitration_id for m in sent[:3]] == [0x200, 0x203, 0x204]
+    assert {m.arbitration_id for m in sent[3:]} == {0x201, 0x202}
 
 
 def test_an_unknown_detector_fails_when_the_output_is_built(
     buses: tuple[can.BusABC, can.BusABC],
 ) -> None:
     with pytest.raises(ConfigError, match="'cnn'"):
-        CanOutput(buses[0], detector="cnn")
+        CanBusSink(buses[0], detector="cnn")
 
 
-def test_sent_frames_can_be_logged(buses: tuple[can.BusABC, can.BusABC], tmp_path) -> None:  # type: ignore[no-untyped-def]
-    tx, _ = buses
-    out = CanOutput(tx, keep_sent=True)
+def test_a_send_error_is_counted_and_the_sink_goes_on(tmp_path: Path) -> None:
+    """A bus that refuses a frame: logged and counted, the next frames still go out."""
+
+    class Flaky(can.BusABC):  # type: ignore[misc]
+        def __init__(self) -> None:
+            super().__init__(channel="flaky")
+            self.sent: list[can.Message] = []
+            self.calls = 0
+
+        def send(self, msg: can.Message, timeout: float | None = None) -> None:
+            self.calls += 1
+            if self.calls == 2:
+                raise can.CanOperationError("transmit buffer full")
+            self.sent.append(msg)
+
+        def _recv_internal(self, timeout: float | None) -> tuple[None, bool]:
+            return None, False
+
+    bus = Flaky()
+    sink = CanBusSink(bus)
     for k in range(3):
-        out.send_status(Status(mode=FusionMode.FUSED, alerts_sent=k), timestamp=1.7e9 + 0.1 * k)
-        out.send_road_status(
-            Status(mode=FusionMode.FUSED, confirmed=k, not_felt=2 * k), timestamp=1.7e9 + 0.1 * k
-        )
-    path = tmp_path / "status.blf"
-    assert write_can_log(path, out.sent) == 6
+        sink.on_status(1.7e9 + 0.1 * k, Status(mode=FusionMode.FUSED, alerts_sent=k))
+    assert sink.send_errors == 1
+    assert len(bus.sent) == 5  # 3 x (RP_STATUS, RP_ROAD_STATUS), one refused
     decoder = OutputDecoder()
-    back = [decoder.decode(m) for m in read_can_log(path, errors="raise")]
-    assert [b.alert_count for b in back[::2]] == [0, 1, 2]  # type: ignore[union-attr]
-    assert [(b.confirmed, b.not_felt) for b in back[1::2]] == [(0, 0), (1, 2), (2, 4)]  # type: ignore[union-attr]
+    back = [decoder.decode(m) for m in bus.sent]
+    assert [b.alert_count for b in back if isinstance(b, ReceivedStatus)] == [0, 1, 2]
+    bus.shutdown()
 
 
 def test_the_listener_only_queues_and_counts_what_it_drops(

@@ -26,8 +26,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from roadpreview.apps.replay import ReplayInputs, ReplayResult, replay
 from roadpreview.pipeline.config import PipelineConfig
-from roadpreview.pipeline.replay import ReplayInputs, ReplayResult, replay
 from roadpreview.sim.presets import demo
 from roadpreview.types import FusionMode
 

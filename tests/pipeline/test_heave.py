@@ -13,13 +13,17 @@ import pytest
 from numpy.typing import NDArray
 from scipy.signal import butter, sosfiltfilt
 
+from roadpreview.apps.replay import ReplayInputs, replay
 from roadpreview.canbus import load_database
 from roadpreview.canbus.dbc import IMU_ACCEL
 from roadpreview.fusion.heave import HeaveConfig
+from roadpreview.loop import run
 from roadpreview.pipeline import Pipeline, PipelineConfig
-from roadpreview.pipeline.core import FrameResult
-from roadpreview.pipeline.replay import ReplayInputs, replay
-from roadpreview.pipeline.sources import CAN, CanSource, Item, VideoSource, merge_streams
+from roadpreview.pipeline.pipeline import FrameResult
+from roadpreview.sinks.files import ResultsSink
+from roadpreview.sources.can import CanLogSource, make_decoder
+from roadpreview.sources.video import VideoFileSource
+from roadpreview.types import InputSample
 
 Array = NDArray[np.float64]
 
@@ -103,23 +107,23 @@ def _run_pipeline(
     """The pipeline over a recording, without the CAN frames of ``drop_ids``."""
     inputs = ReplayInputs.from_recording(rec.folder)
     assert inputs.video_start_s is not None
-    video = VideoSource(inputs.video, start_s=inputs.video_start_s, frames_csv=inputs.frames_csv)
+    video = VideoFileSource(
+        inputs.video, start_s=inputs.video_start_s, frames_csv=inputs.frames_csv
+    )
+    decoder = make_decoder()
 
-    def can() -> Iterator[Item]:
-        for item in CanSource(inputs.can_logs[0]):
-            if item[2].arbitration_id not in drop_ids:
-                yield item
+    class _Dropping(CanLogSource):
+        """The log without the frames of ``drop_ids`` (an accelerometer that is not there)."""
 
-    pipe = Pipeline(rec.camera, config)
-    out: list[FrameResult] = []
-    for t, kind, payload in merge_streams([video, can()]):
-        if kind == CAN:
-            pipe.push_can(payload)
-            continue
-        out.append(pipe.push_frame(t, payload))
-        if len(out) >= frames:
-            break
-    return out
+        def __iter__(self) -> Iterator[InputSample]:
+            for msg in read_can_log(self.path):
+                if msg.arbitration_id not in drop_ids:
+                    yield from self.decoder.decode(msg)
+
+    results = ResultsSink()
+    run([video, _Dropping(inputs.can_logs[0], decoder)], Pipeline(rec.camera, config),
+        [results], max_frames=frames)
+    return results.results
 
 
 @pytest.mark.parametrize("case", ["no accelerometer on the bus", "heave disabled"])

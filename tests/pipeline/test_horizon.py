@@ -7,7 +7,7 @@ import math
 import pytest
 
 from roadpreview.camera import CameraModel
-from roadpreview.pipeline.core import Pipeline
+from roadpreview.pipeline.pipeline import Pipeline
 
 
 def test_grade_is_removed_and_bump_pitching_kept() -> None:

@@ -1,12 +1,14 @@
-"""The replay's CAN log writer (`CanOutputLog`): per alert RP_ALERT then RP_ALERT_DETAIL with the
-same AlertId, RP_CONFIRM at the frame that decided it, RP_STATUS + RP_ROAD_STATUS every period;
+"""The CAN sinks (`roadpreview.sinks.can`) as the run loop drives them: per alert RP_ALERT
+then RP_ALERT_DETAIL with the same AlertId, RP_CONFIRM at the frame that decided it, RP_STATUS + RP_ROAD_STATUS every period;
 everything E2E-valid and decoded back by cantools and by `OutputDecoder`."""
 
 from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import cantools
 import e2e.p01
@@ -21,11 +23,14 @@ from roadpreview.canbus import (
     ReceivedRoadStatus,
     ReceivedStatus,
     read_can_log,
+    write_can_log,
 )
 from roadpreview.errors import ConfigError
-from roadpreview.pipeline.outputs import CanOutputLog
+from roadpreview.pipeline import FrameResult
+from roadpreview.sinks.can import CanMemorySink
 from roadpreview.types import (
     Alert,
+    CameraFrame,
     Confirmation,
     ConfirmationResult,
     FusionMode,
@@ -74,10 +79,44 @@ def plain_db() -> Database:
     return db
 
 
-def _run() -> CanOutputLog:
+@dataclass(frozen=True)
+class _Result:
+    """The part of a `FrameResult` the CAN sinks read."""
+
+    t: float
+    alerts: list[Alert]
+    confirmations: list[ConfirmationResult]
+
+
+class _Log(CanMemorySink):
+    """The sink driven as the run loop drives it: each frame, then the status when due."""
+
+    def __init__(self, period_s: float = 0.1, *, detector: str = "two-axle") -> None:
+        super().__init__(detector=detector)
+        self.period_s = period_s
+        self.next_status = -math.inf
+
+    def frame(
+        self,
+        t: float,
+        status: Status,
+        alerts: list[Alert],
+        confirmations: list[ConfirmationResult] | None = None,
+    ) -> None:
+        result = cast(FrameResult, _Result(t, alerts, confirmations or []))
+        self.on_frame(CameraFrame(t, None), result, status)
+        if t >= self.next_status:
+            self.on_status(t, status)
+            self.next_status = t + self.period_s
+
+    def write(self, path: Path) -> int:
+        return write_can_log(path, self.messages)
+
+
+def _run() -> _Log:
     """1 s at 30 fps: two alerts at frame 3 (a bump and a pothole), a confirmation of the first
     at frame 20, the status of each frame."""
-    log = CanOutputLog(0.1, detector="std")
+    log = _Log(0.1, detector="std")
     bump, hole = _alert(1, T0 + 0.1, 42.0), _alert(2, T0 + 0.1, -66.0)
     confirmed = ConfirmationResult(
         1, Confirmation.CONFIRMED, T0 + 20 / 30, T0 + 20 / 30 - 0.8, 3.1, 0.6
@@ -160,7 +199,7 @@ def test_the_log_file_reads_back(tmp_path: Path) -> None:
 def test_a_status_at_its_defaults_and_no_confirmations_still_write() -> None:
     """What `Pipeline.status()` gives while it does not fill the road part, and the replay's
     call without confirmations."""
-    log = CanOutputLog()
+    log = _Log()
     log.frame(T0, Status(mode=FusionMode.DEGRADED), [_alert(7, T0, math.nan)])
     ids = [m.arbitration_id for m in log.messages]
     assert ids == [0x200, 0x203, 0x201, 0x202]
@@ -174,4 +213,4 @@ def test_a_status_at_its_defaults_and_no_confirmations_still_write() -> None:
 
 def test_an_unknown_detector_fails_when_the_log_is_built() -> None:
     with pytest.raises(ConfigError, match="'cnn'"):
-        CanOutputLog(detector="cnn")
+        CanMemorySink(detector="cnn")

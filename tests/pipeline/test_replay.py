@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
+from roadpreview.apps.replay import ReplayInputs, replay
 from roadpreview.canbus import load_database, read_can_log
 from roadpreview.canbus.output import (
     OutputDecoder,
@@ -22,7 +23,6 @@ from roadpreview.canbus.output import (
 from roadpreview.cli.main import main
 from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.pipeline import Pipeline, PipelineConfig
-from roadpreview.pipeline.replay import ReplayInputs, replay
 from roadpreview.types import FusionMode
 
 
@@ -128,7 +128,7 @@ def test_corrupt_frame_in_the_middle_loses_no_other_frame(short_demo, tmp_path: 
 def test_garbage_frames_are_no_target_not_a_crash(short_demo) -> None:  # type: ignore[no-untyped-def]
     pipe = Pipeline(short_demo.camera, PipelineConfig())
     for i, frame in enumerate([None, np.zeros((720, 1280, 3), np.uint8), np.zeros((10, 10)), "x"]):
-        r = pipe.push_frame(0.1 * (i + 1), frame)
+        r = pipe.push(CameraFrame(0.1 * (i + 1), frame))
         assert not r.lead_found
         assert r.vision_reason
         assert math.isnan(r.y_c)

@@ -64,7 +64,7 @@ def test_recording_has_every_file_and_consistent_sizes(recording: Recording) -> 
     assert frames[0].shape == (270, 480, 3)
     assert recording.truth["frame_t_s"].shape == (n,)
     assert recording.camera.size == (480, 270)
-    assert recording.scenario == _short_demo()
+    assert recording.config == _short_demo()
 
 
 def test_truth_lead_position_is_inside_its_box_and_on_the_mask(recording: Recording) -> None:

@@ -36,7 +36,7 @@ def _decode_only(video: Path) -> tuple[float, int]:
 
 
 def run(repeats: int | None = None, quick: bool = False, seed: int = 0) -> str:
-    from roadpreview.pipeline.replay import ReplayInputs, replay
+    from roadpreview.apps.replay import ReplayInputs, replay
     from roadpreview.sim.dataset import drive_config
     from roadpreview.sim.recording import write_recording
 

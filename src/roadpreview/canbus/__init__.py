@@ -6,119 +6,87 @@
 * `imu_csv`: phone-style IMU CSV files.
 * `output`: `Alert` / `ConfirmationResult` / `Status` -> E2E-protected frames, and back.
 * `logio`: CAN log files in every format python-can reads (BLF, ASC, candump, TRC, CSV, .gz).
-* `live`: python-can buses, a bounded-queue listener, periodic status.
+* `live`: python-can buses, a bounded-queue listener, sending.
+
+The names below are imported lazily (PEP 562): ``import roadpreview.canbus`` loads no
+python-can bus, DBC or E2E code until one of them is used.
 """
 
-from roadpreview.canbus.dbc import (
-    E2E_COUNTER_MODULUS,
-    IMU_ACCEL,
-    IMU_RATES,
-    RESERVED_OUTPUT_IDS,
-    RP_ALERT,
-    RP_ALERT_DETAIL,
-    RP_CONFIRM,
-    RP_ROAD_STATUS,
-    RP_STATUS,
-    VEHICLE_SPEED,
-    WHEEL_SPEEDS,
-    check_protected,
-    e2e_layout,
-    encode_protected,
-    load_database,
-)
-from roadpreview.canbus.decode import (
-    CanInputDecoder,
-    DecodeStats,
-    FrameProblem,
-    decode_log,
-    split_samples,
-)
-from roadpreview.canbus.imu_csv import IMU_CSV_COLUMNS, imu_samples, read_imu_csv
-from roadpreview.canbus.live import BoundedQueueListener, CanOutput, CanReceiver, open_bus, replay
-from roadpreview.canbus.logio import CanLogReader, LogProblem, read_can_log, write_can_log
-from roadpreview.canbus.mapping import (
-    QUANTITIES,
-    InputMapping,
-    available_mappings,
-    bind_mapping,
-    load_mapping,
-)
-from roadpreview.canbus.output import (
-    DETECTOR_CODES,
-    AlertDetailEncoder,
-    AlertEncoder,
-    ConfirmEncoder,
-    OutputDecoder,
-    OutputEncoders,
-    ReceivedAlert,
-    ReceivedAlertDetail,
-    ReceivedConfirm,
-    ReceivedOutput,
-    ReceivedRoadStatus,
-    ReceivedStatus,
-    RoadStatusEncoder,
-    StatusEncoder,
-    alert_frames,
-    detector_code,
-)
-from roadpreview.types import ImuSample, InputSample, SpeedSample, Status
+from __future__ import annotations
 
-__all__ = [
-    "DETECTOR_CODES",
-    "E2E_COUNTER_MODULUS",
-    "IMU_ACCEL",
-    "IMU_CSV_COLUMNS",
-    "IMU_RATES",
-    "QUANTITIES",
-    "RESERVED_OUTPUT_IDS",
-    "RP_ALERT",
-    "RP_ALERT_DETAIL",
-    "RP_CONFIRM",
-    "RP_ROAD_STATUS",
-    "RP_STATUS",
-    "VEHICLE_SPEED",
-    "WHEEL_SPEEDS",
-    "AlertDetailEncoder",
-    "AlertEncoder",
-    "BoundedQueueListener",
-    "CanInputDecoder",
-    "CanLogReader",
-    "CanOutput",
-    "CanReceiver",
-    "ConfirmEncoder",
-    "DecodeStats",
-    "FrameProblem",
-    "ImuSample",
-    "InputMapping",
-    "InputSample",
-    "LogProblem",
-    "OutputDecoder",
-    "OutputEncoders",
-    "ReceivedAlert",
-    "ReceivedAlertDetail",
-    "ReceivedConfirm",
-    "ReceivedOutput",
-    "ReceivedRoadStatus",
-    "ReceivedStatus",
-    "RoadStatusEncoder",
-    "SpeedSample",
-    "Status",
-    "StatusEncoder",
-    "alert_frames",
-    "available_mappings",
-    "bind_mapping",
-    "check_protected",
-    "decode_log",
-    "detector_code",
-    "e2e_layout",
-    "encode_protected",
-    "imu_samples",
-    "load_database",
-    "load_mapping",
-    "open_bus",
-    "read_can_log",
-    "read_imu_csv",
-    "replay",
-    "split_samples",
-    "write_can_log",
-]
+import importlib
+from typing import Any
+
+#: public name -> the module that defines it
+_EXPORTS = {
+    "AlertDetailEncoder": "roadpreview.canbus.output",
+    "AlertEncoder": "roadpreview.canbus.output",
+    "BoundedQueueListener": "roadpreview.canbus.live",
+    "CanInputDecoder": "roadpreview.canbus.decode",
+    "CanLogReader": "roadpreview.canbus.logio",
+    "CanOutput": "roadpreview.canbus.live",
+    "CanReceiver": "roadpreview.canbus.live",
+    "ConfirmEncoder": "roadpreview.canbus.output",
+    "DETECTOR_CODES": "roadpreview.canbus.output",
+    "DecodeStats": "roadpreview.canbus.decode",
+    "E2E_COUNTER_MODULUS": "roadpreview.canbus.dbc",
+    "FrameProblem": "roadpreview.canbus.decode",
+    "IMU_ACCEL": "roadpreview.canbus.dbc",
+    "IMU_CSV_COLUMNS": "roadpreview.canbus.imu_csv",
+    "IMU_RATES": "roadpreview.canbus.dbc",
+    "InputMapping": "roadpreview.canbus.mapping",
+    "LogProblem": "roadpreview.canbus.logio",
+    "OutputDecoder": "roadpreview.canbus.output",
+    "OutputEncoders": "roadpreview.canbus.output",
+    "QUANTITIES": "roadpreview.canbus.mapping",
+    "RESERVED_OUTPUT_IDS": "roadpreview.canbus.dbc",
+    "RP_ALERT": "roadpreview.canbus.dbc",
+    "RP_ALERT_DETAIL": "roadpreview.canbus.dbc",
+    "RP_CONFIRM": "roadpreview.canbus.dbc",
+    "RP_ROAD_STATUS": "roadpreview.canbus.dbc",
+    "RP_STATUS": "roadpreview.canbus.dbc",
+    "ReceivedAlert": "roadpreview.canbus.output",
+    "ReceivedAlertDetail": "roadpreview.canbus.output",
+    "ReceivedConfirm": "roadpreview.canbus.output",
+    "ReceivedOutput": "roadpreview.canbus.output",
+    "ReceivedRoadStatus": "roadpreview.canbus.output",
+    "ReceivedStatus": "roadpreview.canbus.output",
+    "RoadStatusEncoder": "roadpreview.canbus.output",
+    "StatusEncoder": "roadpreview.canbus.output",
+    "VEHICLE_SPEED": "roadpreview.canbus.dbc",
+    "WHEEL_SPEEDS": "roadpreview.canbus.dbc",
+    "alert_frames": "roadpreview.canbus.output",
+    "available_mappings": "roadpreview.canbus.mapping",
+    "bind_mapping": "roadpreview.canbus.mapping",
+    "check_protected": "roadpreview.canbus.dbc",
+    "decode_log": "roadpreview.canbus.decode",
+    "detector_code": "roadpreview.canbus.output",
+    "e2e_layout": "roadpreview.canbus.dbc",
+    "encode_protected": "roadpreview.canbus.dbc",
+    "imu_samples": "roadpreview.canbus.imu_csv",
+    "load_database": "roadpreview.canbus.dbc",
+    "load_mapping": "roadpreview.canbus.mapping",
+    "open_bus": "roadpreview.canbus.live",
+    "read_can_log": "roadpreview.canbus.logio",
+    "read_imu_csv": "roadpreview.canbus.imu_csv",
+    "replay": "roadpreview.canbus.live",
+    "split_samples": "roadpreview.canbus.decode",
+    "write_can_log": "roadpreview.canbus.logio",
+}
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])
+
+
+__all__ = sorted(_EXPORTS)

@@ -61,7 +61,7 @@ import can
 from can.io.blf import BLFParseError
 from can.io.generic import MessageWriter
 
-from roadpreview.errors import ConfigError, InputDataError
+from roadpreview.errors import ConfigError, InputDataError, OperationError
 
 log = logging.getLogger(__name__)
 
@@ -131,41 +131,68 @@ def _open_writer(path: str | Path, fmt: str, gz: bool) -> MessageWriter:
     return can.Logger(os.fspath(path))
 
 
+class CanLogWriter:
+    """A CAN log written as frames come (format by suffix), for sinks that stream.
+
+    Timestamps must not decrease (a logger stores frames as they arrive); for
+    BLF they must be Unix times (>= 1990). A frame that breaks either rule is
+    refused with `InputDataError` naming the file and the frame's index; the
+    file keeps what was written before it. ``close`` flushes and closes.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        try:
+            self.format, gz = log_format(path)
+        except InputDataError as exc:
+            raise ConfigError(str(exc)) from None
+        self.path = Path(path)
+        self._writer: MessageWriter | None = _open_writer(path, self.format, gz)
+        self.count = 0  #: frames written
+        self._last = -math.inf
+
+    def write(self, msg: can.Message) -> None:
+        """Append one frame (module rules)."""
+        if self._writer is None:
+            raise OperationError(f"{self.path}: the CAN log is closed")
+        ts = float(msg.timestamp)
+        if ts < self._last:
+            raise InputDataError(
+                f"{self.path}: message {self.count} has timestamp {ts:.6f} s, earlier than the"
+                f" previous {self._last:.6f} s; a CAN log is in reception order"
+            )
+        if self.format == ".blf" and self.count == 0 and ts < _BLF_MIN_TIMESTAMP:
+            raise InputDataError(
+                f"{self.path}: first timestamp {ts:.6f} s is not a Unix time; BLF stores the"
+                " start as a calendar date and python-can would read these frames back"
+                " shifted (add a Unix epoch offset)"
+            )
+        self._writer.on_message_received(msg)
+        self._last = ts
+        self.count += 1
+
+    def close(self) -> None:
+        """Flush and close (idempotent)."""
+        if self._writer is not None:
+            writer, self._writer = self._writer, None
+            writer.stop()
+
+
 def write_can_log(path: str | Path, messages: Iterable[can.Message]) -> int:
     """Write ``messages`` (in reception order) to a CAN log chosen by suffix; return the count.
 
-    Timestamps must not decrease (a logger stores frames as they arrive);
-    for BLF they must be Unix times (>= 1990). On an error the partly
-    written file is removed and `InputDataError` names the message index.
+    The rules of `CanLogWriter`; on an error the partly written file is removed
+    and `InputDataError` names the message index.
     """
+    writer = CanLogWriter(path)
     try:
-        fmt, gz = log_format(path)
-    except InputDataError as exc:
-        raise ConfigError(str(exc)) from None
-    count = 0
-    last = -float("inf")
-    try:
-        with _open_writer(path, fmt, gz) as writer:
-            for msg in messages:
-                ts = float(msg.timestamp)
-                if ts < last:
-                    raise InputDataError(
-                        f"{path}: message {count} has timestamp {ts:.6f} s, earlier than the"
-                        f" previous {last:.6f} s; a CAN log is in reception order"
-                    )
-                if fmt == ".blf" and count == 0 and ts < _BLF_MIN_TIMESTAMP:
-                    raise InputDataError(
-                        f"{path}: first timestamp {ts:.6f} s is not a Unix time; BLF stores the"
-                        " start as a calendar date and python-can would read these frames back"
-                        " shifted (add a Unix epoch offset)"
-                    )
-                writer.on_message_received(msg)
-                last = ts
-                count += 1
+        for msg in messages:
+            writer.write(msg)
     except BaseException:
+        writer.close()
         Path(path).unlink(missing_ok=True)
         raise
-    return count
+    writer.close()
+    return writer.count
 
 
 @dataclass(frozen=True)

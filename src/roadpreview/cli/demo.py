@@ -26,7 +26,7 @@ def add_subparser(sub: Any) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from roadpreview.pipeline.replay import (
+    from roadpreview.apps.replay import (
         ReplayInputs,
         format_alerts,
         format_modes,

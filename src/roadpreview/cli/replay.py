@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -42,14 +43,15 @@ def add_subparser(sub: Any) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from roadpreview.camera import CameraModel
-    from roadpreview.errors import ConfigError
-    from roadpreview.pipeline.replay import (
+    from roadpreview.apps.replay import (
         ReplayInputs,
         format_modes,
         print_progress,
         replay,
     )
+    from roadpreview.camera import CameraModel
+    from roadpreview.errors import ConfigError
+    from roadpreview.loop import install_signal_handlers
 
     if args.input.is_dir():
         inputs = ReplayInputs.from_recording(args.input)
@@ -69,9 +71,19 @@ def _run(args: argparse.Namespace) -> int:
         if args.truth:
             raise ConfigError("--truth needs a simulator recording folder")
     config = pipeline_config(args)
-    result = replay(
-        inputs, config, args.out, annotated_video=args.annotate, progress=print_progress
-    )
+    stop = threading.Event()
+    handlers = install_signal_handlers(stop)  # Ctrl-C / SIGTERM: stop, flush, close outputs
+    try:
+        result = replay(
+            inputs,
+            config,
+            args.out,
+            annotated_video=args.annotate,
+            progress=print_progress,
+            stop=stop,
+        )
+    finally:
+        handlers.restore()
     print(
         f"\n{result.frames} frames in {result.seconds:.1f} s ({result.fps:.1f} fps), "
         f"{len(result.alerts)} alert(s), {result.decode_failures} undecodable frame(s), "
@@ -82,4 +94,7 @@ def _run(args: argparse.Namespace) -> int:
     if result.match is not None:
         print(result.match.table())
     print(f"outputs in {args.out}: alerts.blf, alerts.jsonl, frames.csv, plots.png, summary.json")
+    if result.interrupted:
+        print("interrupted: the outputs hold everything up to the last frame processed")
+        return 130
     return 0

@@ -51,13 +51,13 @@ def add_subparser(sub: Any) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from roadpreview.camera import CameraModel
-    from roadpreview.pipeline.daemon import (
+    from roadpreview.apps.daemon import (
         Daemon,
         DaemonOptions,
         install_signal_handlers,
         iter_summary_lines,
     )
+    from roadpreview.camera import CameraModel
 
     config = pipeline_config(args)
     overrides = {

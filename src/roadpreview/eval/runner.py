@@ -38,12 +38,15 @@ from numpy.typing import NDArray
 
 from roadpreview import __version__
 from roadpreview.anomaly.base import TrajectorySample
+from roadpreview.camera import CameraModel
 from roadpreview.configtools import to_mapping
 from roadpreview.errors import InputDataError, OperationError
 from roadpreview.eval.methods import REFERENCE_METHOD, MethodSpec, NanStdFallback, method_config
 from roadpreview.pipeline.config import PipelineConfig
+from roadpreview.pipeline.pipeline import FrameResult, Pipeline
+from roadpreview.pitch import PitchEstimator, make_estimator
 from roadpreview.sim.scenario import ScenarioConfig
-from roadpreview.types import FusionMode
+from roadpreview.types import Alert, CameraFrame, FusionMode, Sample, Status
 
 log = logging.getLogger(__name__)
 
@@ -53,8 +56,8 @@ Array = NDArray[np.float64]
 TRACE_FORMAT = 4
 _PACKAGE = Path(__file__).resolve().parents[1]
 #: sub-packages and modules whose source does not change what a trace holds (the detectors
-#: run on the stored trajectory afterwards; the output writers only write files)
-_NOT_PIPELINE = ("eval", "cli", "bench", "sim", "anomaly", "pipeline/outputs.py")
+#: run on the stored trajectory afterwards; the sinks only write files; the apps compose)
+_NOT_PIPELINE = ("eval", "cli", "bench", "sim", "anomaly", "sinks", "apps")
 
 
 # -- digests ------------------------------------------------------------------------------------
@@ -229,7 +232,7 @@ class _TraceRecorder:
         self.rows: dict[str, list[float]] = {c: [] for c in names}
         self.seconds = 0.0
 
-    def add(self, r: Any) -> None:
+    def add(self, r: FrameResult) -> None:
         rows = self.rows
         rows["t"].append(r.t - self.t0)
         for c in FLOAT_COLUMNS[1:-4]:
@@ -396,55 +399,86 @@ def trace_path(job: RecordingJob, method: str, key: str) -> Path:
     return job.trace_dir / f"{method}-{key}.npz"
 
 
-def run_methods(folder: Path, methods: MethodSet) -> dict[str, Trace]:
-    """Every method over one recording folder, sharing the reference's vision pass."""
-    from roadpreview.pipeline.core import Pipeline
-    from roadpreview.pipeline.replay import ReplayInputs
-    from roadpreview.pipeline.sources import CAN, CanSource, VideoSource, merge_streams
+class SharedVision:
+    """Several pipelines, one per method, driven by the run loop as one stage: the
+    reference pipeline's vision front end runs once per frame and its `FrameVision` goes
+    to every pipeline's ``push_vision`` (exactly `Pipeline.push` of a frame, split), IMU
+    and speed samples go to every pipeline. Each method's frames are recorded as a
+    `Trace`; the loop sees the reference's results."""
 
-    inputs = ReplayInputs.from_recording(folder)
-    start = float(inputs.video_start_s or 0.0)
-    reference = methods.reference
-    order = [reference, *(m for m in methods.configs if m != reference)]
-    pipes = {m: Pipeline(inputs.camera, methods.configs[m]) for m in order}
-    for m, std in methods.nan_std.items():
-        pipes[m].pitch = NanStdFallback(pipes[m].pitch, std)
-    ref = pipes[reference]
-    recorders = {m: _TraceRecorder(m, start, inputs.camera.fy) for m in order}
-    video = VideoSource(inputs.video, start_s=start, frames_csv=inputs.frames_csv)
-    if video.size != inputs.camera.size:
-        raise InputDataError(
-            f"{inputs.video}: frames are {video.size[0]}x{video.size[1]} but the camera "
-            f"calibration is for {inputs.camera.width}x{inputs.camera.height}"
-        )
-    sources: list[Any] = [video, *(CanSource(p) for p in inputs.can_logs)]
-    vision_s = 0.0
-    last_t = -math.inf
-    clock = time.perf_counter
-    for t, kind, payload in merge_streams(sources):
-        if kind == CAN:
-            for p in pipes.values():
-                p.push_can(payload)
-            continue
-        if t <= last_t:
-            log.warning("%s: frame at %.6f s is not after the previous one; skipped", folder, t)
-            continue
-        last_t = t
+    def __init__(
+        self, pipes: dict[str, Pipeline], reference: str, recorders: dict[str, _TraceRecorder]
+    ) -> None:
+        self.pipes = pipes
+        self.ref = pipes[reference]
+        self.reference = reference
+        self.recorders = recorders
+        self.vision_s = 0.0
+        self.input_errors = 0
+
+    def push(self, sample: Sample) -> FrameResult | None:
+        if not isinstance(sample, CameraFrame):
+            for p in self.pipes.values():
+                p.push(sample)
+            return None
+        clock = time.perf_counter
         c0 = clock()
-        # exactly Pipeline.push_frame, split so that every method sees this FrameVision
-        fv = ref.vision.process(t, payload, pitch_rad=ref.pitch_rad)
-        vision_s += clock() - c0
-        for m, p in pipes.items():
+        fv = self.ref.vision.process(sample.t_s, sample.image, pitch_rad=self.ref.pitch_rad)
+        self.vision_s += clock() - c0
+        out: FrameResult | None = None
+        for m, p in self.pipes.items():
             c1 = clock()
-            r = p.push_vision(t, fv)
-            rec = recorders[m]
+            r = p.push_vision(sample.t_s, fv)
+            rec = self.recorders[m]
             rec.seconds += clock() - c1
             rec.add(r)
+            if m == self.reference:
+                out = r
+        return out
+
+    def finish(self) -> list[Alert]:
+        return self.ref.finish()
+
+    def status(self) -> Status:
+        return self.ref.status()
+
+
+def run_methods(folder: Path, methods: MethodSet) -> dict[str, Trace]:
+    """Every method over one recording folder, sharing the reference's vision pass: the
+    replay's sources and the run loop, with `SharedVision` as the stage."""
+    from roadpreview.apps.replay import ReplayInputs
+    from roadpreview.loop import run
+
+    inputs = ReplayInputs.from_recording(folder)
+    reference = methods.reference
+    order = [reference, *(m for m in methods.configs if m != reference)]
+    video, sources = inputs.sources(methods.configs[reference])
+    start = video.start_s
+    pipes = {
+        m: Pipeline(
+            inputs.camera,
+            methods.configs[m],
+            pitch=_pitch_with_fallback(inputs.camera, methods.configs[m], methods.nan_std.get(m)),
+        )
+        for m in order
+    }
+    recorders = {m: _TraceRecorder(m, start, inputs.camera.fy) for m in order}
+    stage = SharedVision(pipes, reference, recorders)
+    run(sources, stage, status_period_s=methods.configs[reference].can.status_period_s)
     if not recorders[reference].rows["t"]:
         raise InputDataError(f"{inputs.video}: no frame could be read")
     for rec in recorders.values():  # the shared vision step, split evenly
-        rec.seconds += vision_s / len(recorders)
+        rec.seconds += stage.vision_s / len(recorders)
     return {m: recorders[m].trace() for m in order}
+
+
+def _pitch_with_fallback(
+    camera: CameraModel, cfg: PipelineConfig, nan_std: float | None
+) -> PitchEstimator | None:
+    """The method's pitch estimator with `NanStdFallback` (None: the pipeline's default)."""
+    if nan_std is None:
+        return None
+    return NanStdFallback(make_estimator(cfg.pitch.estimator, camera, **cfg.pitch.options), nan_std)
 
 
 @dataclass(frozen=True)

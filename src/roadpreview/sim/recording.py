@@ -1,6 +1,6 @@
 """Write a simulated drive to disk as a real recording with ground truth, and read it back.
 
-One folder per drive::
+One folder per drive (the format: `roadpreview.sources.recording`)::
 
     video.mp4          the camera, through cv2.VideoWriter (real compression artefacts)
     frames.csv         frame index -> time stamp (s, the simulation clock)
@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from roadpreview.camera import CameraModel
 from roadpreview.canbus import load_database
-from roadpreview.errors import InputDataError, OperationError
+from roadpreview.errors import OperationError
 from roadpreview.sim.canlog import DEFAULT_T0_UNIX_S, write_drive_can, write_imu_csv
 from roadpreview.sim.imu import simulate_imu, simulate_speed
 from roadpreview.sim.motion import DriveMotion, simulate_motion
@@ -43,6 +43,7 @@ from roadpreview.sim.render import SceneRenderer
 from roadpreview.sim.scenario import ScenarioConfig
 from roadpreview.sim.scene import generate_scene
 from roadpreview.sim.types import Conditions
+from roadpreview.sources.recording import RecordingFolder
 
 log = logging.getLogger(__name__)
 
@@ -241,56 +242,11 @@ def _render_video(
 
 
 # -- reading ---------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Recording:
-    """A recording folder opened for reading (replay, tests, evaluation)."""
-
-    folder: Path
-    scenario: ScenarioConfig
-    camera: CameraModel
-    truth: dict[str, NDArray[Any]]
-    info: dict[str, Any]
-
-    @classmethod
-    def open(cls, folder: str | Path) -> Recording:
-        folder = Path(folder)
-        for name in ("scenario.toml", "camera.toml", "truth.npz", "truth.json"):
-            if not (folder / name).is_file():
-                raise InputDataError(f"{folder}: not a roadpreview recording ({name} is missing)")
-        with np.load(folder / "truth.npz") as npz:
-            truth = {k: npz[k] for k in npz.files}
-        try:
-            info = json.loads((folder / "truth.json").read_text())
-        except json.JSONDecodeError as exc:
-            raise InputDataError(f"{folder / 'truth.json'}: not valid JSON: {exc}") from None
-        return cls(
-            folder=folder,
-            scenario=ScenarioConfig.load(folder / "scenario.toml"),
-            camera=CameraModel.load(folder / "camera.toml"),
-            truth=truth,
-            info=info,
-        )
+class Recording(RecordingFolder):
+    """A recording folder opened by the simulator's side: `RecordingFolder` (the format,
+    `roadpreview.sources.recording`) plus the scenario as a `ScenarioConfig`."""
 
     @property
-    def video(self) -> Path:
-        return self.folder / "video.mp4"
-
-    @property
-    def events(self) -> list[dict[str, Any]]:
-        return list(self.info["events"])
-
-    def can_log(self) -> Path:
-        """The first CAN log present (blf, asc, then candump)."""
-        for fmt in ("blf", "asc", "log"):
-            p = self.folder / f"can.{fmt}"
-            if p.is_file():
-                return p
-        raise InputDataError(f"{self.folder}: no CAN log (can.blf, can.asc or can.log)")
-
-    def mask(self, frame: int) -> NDArray[np.int16]:
-        """The vehicle-id mask of a frame (needs ``output.masks`` at recording time)."""
-        path = self.folder / "masks" / f"{frame:06d}.png"
-        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise InputDataError(f"{path}: no mask (record with output.masks = true)")
-        return img.astype(np.int16)
+    def config(self) -> ScenarioConfig:
+        """The scenario that made the drive (scenario.toml, checked)."""
+        return ScenarioConfig.load(self.folder / "scenario.toml")

@@ -1,7 +1,10 @@
-"""`Pipeline`: frames and CAN/IMU samples in (timestamp order), trajectory, pitch, modes,
-detector output and alerts out. The same object serves replay, the daemon and the demo.
+"""`Pipeline`: typed samples in (`roadpreview.types`: camera frames, IMU and speed samples,
+in time-stamp order), trajectory, pitch, modes, detector output and alerts out. It knows
+no CAN, no files and no clocks: sources decode and stamp the samples, the run loop
+(`roadpreview.pipeline.loop`) orders them, sinks write what comes out. The same object
+serves replay, the daemon, the evaluation and the demo.
 
-Per frame (``push_frame``):
+Per frame (``push`` of a `CameraFrame`):
 
 1. vision: lead observation y(t) (and halves, box, distance) and background
    correspondences against the current key frame, with a texture measure;
@@ -19,33 +22,29 @@ from __future__ import annotations
 
 import logging
 import math
-from collections import deque
 from dataclasses import dataclass, field, replace
-from typing import Any
-
-import can
-import numpy as np
+from typing import Any, overload
 
 from roadpreview.anomaly import AlertBuilder, TrajectorySample, make_detector
 from roadpreview.anomaly.base import AnomalyEvent
 from roadpreview.anomaly.confirm import EgoConfirmer
 from roadpreview.anomaly.roughness import RoadRoughness
 from roadpreview.camera import CameraModel
-from roadpreview.canbus import load_database
-from roadpreview.canbus.decode import CanInputDecoder
-from roadpreview.canbus.mapping import load_mapping
+from roadpreview.ego.kinematics import EgoSpeed, HorizonFilter, LeadKinematics
 from roadpreview.ego.vertical import EgoVerticalMonitor
 from roadpreview.fusion import FusedPitch, VisualPitch, compensation, make_fusion
 from roadpreview.fusion.heave import HeaveObserver, HeaveTerm
 from roadpreview.pipeline.config import PipelineConfig
-from roadpreview.pitch import make_estimator
+from roadpreview.pitch import PitchEstimator, make_estimator
 from roadpreview.types import (
     Alert,
+    CameraFrame,
     Confirmation,
     ConfirmationResult,
     FusionMode,
     ImuSample,
     RoadState,
+    Sample,
     SpeedSample,
     Status,
     SuppressionReason,
@@ -182,103 +181,64 @@ class FrameResult:
         ]
 
 
-class _LeadKinematics:
-    """The lead's longitudinal acceleration = the ego's + the second derivative of the
-    gap, from a quadratic fit of the distance over a sliding window (robust to the
-    frame-to-frame noise of the distance estimate)."""
-
-    def __init__(self, window_s: float) -> None:
-        self.window_s = window_s
-        self._t: deque[float] = deque()
-        self._d: deque[float] = deque()
-
-    def reset(self) -> None:
-        self._t.clear()
-        self._d.clear()
-
-    def push(self, t: float, distance_m: float, ego_accel: float | None) -> float | None:
-        if math.isfinite(distance_m):
-            self._t.append(t)
-            self._d.append(distance_m)
-        while self._t and self._t[0] < t - self.window_s:
-            self._t.popleft()
-            self._d.popleft()
-        if len(self._t) < 8 or self._t[-1] - self._t[0] < 0.5 * self.window_s:
-            return None
-        tt = np.fromiter(self._t, float) - t
-        coef, cov = np.polyfit(tt, np.fromiter(self._d, float), 2, cov=True)
-        rel = 2.0 * float(coef[0])
-        rel_std = 2.0 * math.sqrt(max(float(cov[0, 0]), 0.0))
-        # shrink towards zero by three standard deviations: the distance estimate jumps
-        # while the lead bounces over a bump (its box moves), which is not braking
-        rel = math.copysign(max(abs(rel) - 3.0 * rel_std, 0.0), rel)
-        return rel + (ego_accel or 0.0)
-
-
-@dataclass
-class _Speed:
-    t: float = math.nan
-    v: float = math.nan
-    accel: float | None = None
-    history: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=64))
-
-    def push(self, t: float, v: float) -> None:
-        if not math.isfinite(v):
-            return
-        self.history.append((t, v))
-        self.t, self.v = t, v
-        old = [(tt, vv) for tt, vv in self.history if tt >= t - 0.5]
-        if len(old) >= 3 and old[-1][0] - old[0][0] > 0.1:
-            self.accel = (old[-1][1] - old[0][1]) / (old[-1][0] - old[0][0])
-
-
 class Pipeline:
     """The streaming estimator (module docstring). Push in timestamp order."""
 
-    def __init__(self, camera: CameraModel, config: PipelineConfig | None = None) -> None:
+    def __init__(
+        self,
+        camera: CameraModel,
+        config: PipelineConfig | None = None,
+        *,
+        pitch: PitchEstimator | None = None,
+    ) -> None:
+        """``pitch``: an estimator to use instead of the configured one (the evaluation's
+        adapters); the configuration's ``[pitch]`` options then do not apply."""
         self.camera = camera
         self.config = config or PipelineConfig()
         cfg = self.config
         self.vision = VisionFrontEnd(camera, cfg.vision)
-        self.pitch = make_estimator(cfg.pitch.estimator, camera, **cfg.pitch.options)
+        self.pitch: PitchEstimator = pitch or make_estimator(
+            cfg.pitch.estimator, camera, **cfg.pitch.options
+        )
         self.fusion = make_fusion(cfg.fusion.backend, **cfg.fusion.options)
         self.detector = make_detector(cfg.anomaly, camera.fy)
         signal = cfg.anomaly.std.signal
         if signal.focal_px is None:
             signal = replace(signal, focal_px=camera.fy)
         self.alert_builder = AlertBuilder(cfg.anomaly.alert, signal=signal)
-        db = load_database(cfg.can.dbc or None, strict=not cfg.can.dbc)
-        self.can_decoder = CanInputDecoder(
-            db, load_mapping(cfg.can.mapping), db_name=cfg.can.dbc or "roadpreview.dbc"
-        )
-        for quantity, why in self.can_decoder.missing.items():
-            log.warning("CAN input: %s is not available (%s)", quantity, why)
         self.ego_vertical = EgoVerticalMonitor(cfg.ego)
         self.roughness = RoadRoughness(cfg.anomaly.roughness, cfg.anomaly.two_axle.vehicle)
         self.confirmer = EgoConfirmer(cfg.anomaly.confirm)
-        self._lead = _LeadKinematics(cfg.lead.window_s)
+        self._lead = LeadKinematics(cfg.lead.window_s)
         on = cfg.heave.enabled
         self.heave = HeaveObserver(cfg.heave) if on else None
         self._heave_term = HeaveTerm(cfg.heave, camera.fy) if on else None
-        self._speed = _Speed()
+        self._speed = EgoSpeed()
+        self._horizon = HorizonFilter(cfg.fusion.horizon_highpass_s)
         self._key_index = -1
         self._phi = 0.0
-        self._phi_slow = math.nan  # low-pass of the fused pitch (horizon_highpass_s)
-        self._phi_slow_t = math.nan
-        self._horizon_pitch = 0.0
         self._last_gyro_t = -math.inf
         self.frames = 0
         self.alerts_sent = 0
+        #: samples the sources lost (undecodable, garbled, rejected) so far, for the
+        #: status; the run loop keeps it up to date
+        self.input_errors = 0
         self.last: FrameResult | None = None
 
     # -- inputs ---------------------------------------------------------------------
-    def push_can(self, msg: can.Message) -> None:
-        """A received CAN frame (any ID: unknown or broken frames are counted and skipped)."""
-        for sample in self.can_decoder.decode(msg):
-            if isinstance(sample, ImuSample):
-                self.push_imu(sample)
-            elif isinstance(sample, SpeedSample):
-                self.push_speed(sample)
+    @overload
+    def push(self, sample: CameraFrame) -> FrameResult: ...
+    @overload
+    def push(self, sample: ImuSample | SpeedSample) -> None: ...
+    def push(self, sample: Sample) -> FrameResult | None:
+        """Take one sample (in time-stamp order); a camera frame gives its `FrameResult`."""
+        if isinstance(sample, CameraFrame):
+            return self.push_frame(sample)
+        if isinstance(sample, ImuSample):
+            self.push_imu(sample)
+        else:
+            self.push_speed(sample)
+        return None
 
     def push_imu(self, sample: ImuSample) -> None:
         if self.heave is not None:
@@ -298,16 +258,17 @@ class Pipeline:
         self._speed.push(sample.t_s, sample.speed_mps)
 
     # -- the frame step -----------------------------------------------------------------
-    def push_frame(self, t: float, frame: Any) -> FrameResult:
-        """Process one camera frame taken at ``t`` (BGR uint8; None or garbage: no target)."""
-        return self.push_vision(t, self.vision.process(t, frame, pitch_rad=self.pitch_rad))
+    def push_frame(self, frame: CameraFrame) -> FrameResult:
+        """Process one camera frame (its image None or garbage: no target)."""
+        t = frame.t_s
+        return self.push_vision(t, self.vision.process(t, frame.image, pitch_rad=self.pitch_rad))
 
     @property
     def pitch_rad(self) -> float:
         """The camera's pitch relative to the road for the vision's horizon (0 before the
         first frame): the fused pitch of the last frame high-passed (``fusion.
         horizon_highpass_s``), since the slow part is the grade the lead shares."""
-        return self._horizon_pitch
+        return self._horizon.pitch_rad
 
     @property
     def last_gyro_t(self) -> float:
@@ -344,7 +305,7 @@ class Pipeline:
         fused: FusedPitch = self.fusion.estimate(t)
         phi = fused.phi if math.isfinite(fused.phi) else 0.0
         self._phi = phi
-        self._update_horizon(t, phi)
+        self._horizon.update(t, phi)
 
         lead = fv.lead
         f = self.camera.fy
@@ -353,7 +314,7 @@ class Pipeline:
             float(compensation(v, phi, f)) - heave_px if math.isfinite(v) else math.nan
             for v in (lead.y, lead.y_left, lead.y_right)
         )
-        ego_speed = self._speed.v if math.isfinite(self._speed.v) else None
+        ego_speed = self._speed.speed_mps
         if lead.target_changed:
             self._lead.reset()
         lead_accel = self._lead.push(t, lead.distance_m, self._speed.accel)
@@ -452,18 +413,6 @@ class Pipeline:
         est = self.heave.at(t + offset)
         return est.dz_m, self._heave_term.update(t, est, distance_m, target_changed)
 
-    def _update_horizon(self, t: float, phi: float) -> None:
-        """First-order low-pass of φ (exact for any frame interval); horizon = φ - low-pass."""
-        if not math.isfinite(self._phi_slow) or not t > self._phi_slow_t:
-            if not math.isfinite(self._phi_slow):
-                self._phi_slow = phi
-            self._phi_slow_t = t if math.isfinite(t) else self._phi_slow_t
-        else:
-            a = 1.0 - math.exp(-(t - self._phi_slow_t) / self.config.fusion.horizon_highpass_s)
-            self._phi_slow += a * (phi - self._phi_slow)
-            self._phi_slow_t = t
-        self._horizon_pitch = phi - self._phi_slow
-
     def finish(self) -> list[Alert]:
         """End of input: alerts for events still held by the non-maximum suppression."""
         events = self.detector.flush()
@@ -486,7 +435,7 @@ class Pipeline:
             time_offset_s=r.time_offset if math.isfinite(r.time_offset) else None,
             suppressed=r.suppressed,
             alerts_sent=self.alerts_sent,
-            input_errors_total=self.can_decoder.stats.skipped,
+            input_errors_total=self.input_errors,
             frames_processed=self.frames,
             road=r.road,
             precision=self.confirmer.precision() if self.confirmer.resolved else None,

@@ -1,24 +1,26 @@
-"""What a replay writes: alerts as a CAN log and JSON lines, the per-frame table,
-plots, an annotated video, and a summary."""
+"""File sinks: the alerts as JSON lines, the per-frame table, the plots and the annotated
+video (the CAN log is `roadpreview.sinks.can.CanLogSink`)."""
 
 from __future__ import annotations
 
 import csv
 import json
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-import can
 import cv2
 import numpy as np
 
-from roadpreview.canbus import write_can_log
-from roadpreview.canbus.output import OutputEncoders
-from roadpreview.pipeline.core import FrameResult
-from roadpreview.types import Alert, ConfirmationResult, FusionMode, Status
+from roadpreview.pipeline.pipeline import FrameResult
+from roadpreview.sinks import Sink
+from roadpreview.types import Alert, CameraFrame, ConfirmationResult, FusionMode, Image, Status
+
+if TYPE_CHECKING:
+    from roadpreview.pipeline.run_summary import RunSummary
 
 
 def alert_json(alert: Alert) -> dict[str, Any]:
@@ -50,46 +52,11 @@ class FrameTableWriter:
             ]
         )
 
+    def flush(self) -> None:
+        self._fh.flush()
+
     def close(self) -> None:
         self._fh.close()
-
-
-class CanOutputLog:
-    """The CAN outputs of a run, kept in memory (a few frames per second) and written to a
-    log at the end: per alert RP_ALERT then RP_ALERT_DETAIL as it is emitted, per
-    confirmation RP_CONFIRM at its frame, and RP_STATUS + RP_ROAD_STATUS every
-    ``period_s``. ``detector`` (``anomaly.detector``) goes into RP_ALERT_DETAIL."""
-
-    def __init__(self, period_s: float = 0.1, *, detector: str = "two-axle") -> None:
-        self.period_s = period_s
-        self._enc = OutputEncoders(detector=detector)
-        self.messages: list[can.Message] = []
-        self._next_status = -math.inf
-
-    @property
-    def detector(self) -> str:
-        return self._enc.detector
-
-    def frame(
-        self,
-        t: float,
-        status: Status,
-        alerts: Sequence[Alert],
-        confirmations: Sequence[ConfirmationResult] = (),
-    ) -> None:
-        """One frame at ``t``: its alerts and confirmations (``FrameResult.alerts`` /
-        ``.confirmations``) and the status after it (``Pipeline.status()``; its precision
-        goes into each RP_CONFIRM)."""
-        for a in alerts:
-            self.messages += self._enc.alert_frames(a, timestamp=t)
-        for c in confirmations:
-            self.messages.append(self._enc.confirm.encode(c, status.precision, timestamp=t))
-        if t >= self._next_status:
-            self.messages += self._enc.status_frames(status, timestamp=t)
-            self._next_status = t + self.period_s
-
-    def write(self, path: Path) -> int:
-        return write_can_log(path, self.messages)
 
 
 class SeriesRecorder:
@@ -184,7 +151,7 @@ class AnnotatedVideoWriter:
         self._w = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"mp4v"), fps, size)
         self.size = size
 
-    def write(self, frame: Any, r: FrameResult) -> None:
+    def write(self, frame: Image | None, r: FrameResult) -> None:
         if frame is None:
             frame = np.zeros((self.size[1], self.size[0], 3), np.uint8)
         img = frame.copy()
@@ -223,14 +190,124 @@ def write_jsonl(
     by_id = {c.alert_id: c for c in confirmations}
     with path.open("w") as fh:
         for a in alerts:
-            d = alert_json(a)
-            c = by_id.get(a.alert_id)
-            d["confirmation"] = None if c is None else c.outcome.name
-            for key, value in (
-                ("confirmation_t_s", None if c is None else c.t_s),
-                ("ego_arrival_t_s", None if c is None else c.t_arrival_s),
-                ("ego_peak_mps2", None if c is None else c.peak_mps2),
-                ("ego_background_mps2", None if c is None else c.background_mps2),
-            ):
-                d[key] = value if value is None or math.isfinite(value) else None
-            fh.write(json.dumps(d) + "\n")
+            fh.write(json.dumps(alert_record(a, by_id.get(a.alert_id))) + "\n")
+
+
+def alert_record(alert: Alert, c: ConfirmationResult | None) -> dict[str, Any]:
+    """One line of ``alerts.jsonl``: the alert and its confirmation (None: pending)."""
+    d = alert_json(alert)
+    d["confirmation"] = None if c is None else c.outcome.name
+    for key, value in (
+        ("confirmation_t_s", None if c is None else c.t_s),
+        ("ego_arrival_t_s", None if c is None else c.t_arrival_s),
+        ("ego_peak_mps2", None if c is None else c.peak_mps2),
+        ("ego_background_mps2", None if c is None else c.background_mps2),
+    ):
+        d[key] = value if value is None or math.isfinite(value) else None
+    return d
+
+
+# -- the sinks ------------------------------------------------------------------------------
+class FrameTableSink(Sink):
+    """``frames.csv``: one row per frame (`FrameResult.COLUMNS`), flushed every
+    ``flush_every`` frames so that an interrupt keeps what was processed."""
+
+    def __init__(self, path: str | Path, *, flush_every: int = 30) -> None:
+        self.writer = FrameTableWriter(Path(path))
+        self.flush_every = flush_every
+        self._n = 0
+
+    def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
+        self.writer.write(result)
+        self._n += 1
+        if self._n % self.flush_every == 0:
+            self.writer.flush()
+
+    def close(self, summary: RunSummary) -> None:
+        self.writer.close()
+
+
+class AlertsJsonlSink(Sink):
+    """``alerts.jsonl``: one JSON object per alert, appended (and flushed) as the alert is
+    emitted; at close the file is rewritten (atomically) with what the ego felt at each
+    alerted spot it passed (`write_jsonl`)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._fh: TextIO | None = self.path.open("w")
+        self.alerts: list[Alert] = []
+        self.confirmations: list[ConfirmationResult] = []
+
+    def _append(self, alerts: Sequence[Alert]) -> None:
+        for a in alerts:
+            self.alerts.append(a)
+            if self._fh is not None:
+                self._fh.write(json.dumps(alert_record(a, None)) + "\n")
+        if alerts and self._fh is not None:
+            self._fh.flush()
+
+    def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
+        self._append(result.alerts)
+        self.confirmations.extend(result.confirmations)
+
+    def on_flush(self, t_s: float, alerts: Sequence[Alert], status: Status) -> None:
+        self._append(alerts)
+
+    def close(self, summary: RunSummary) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        write_jsonl(tmp, self.alerts, self.confirmations)
+        os.replace(tmp, self.path)
+
+
+class PlotSink(Sink):
+    """``plots.png`` at close (`plot_run`), times from ``t0``; ``truth_times``: when the
+    lead crossed the true anomalies (pipeline clock)."""
+
+    def __init__(
+        self, path: str | Path, *, t0: float = 0.0, truth_times: Sequence[float] = ()
+    ) -> None:
+        self.path = Path(path)
+        self.t0 = t0
+        self.truth_times = list(truth_times)
+        self.series = SeriesRecorder()
+        self.alerts: list[Alert] = []
+
+    def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
+        self.series.add(result)
+        self.alerts.extend(result.alerts)
+
+    def on_flush(self, t_s: float, alerts: Sequence[Alert], status: Status) -> None:
+        self.alerts.extend(alerts)
+
+    def close(self, summary: RunSummary) -> None:
+        if self.series.cols["t"]:
+            plot_run(
+                self.series, self.alerts, self.path, t0=self.t0, truth_times=self.truth_times
+            )
+
+
+class AnnotatedVideoSink(Sink):
+    """``annotated.mp4``: the input frames with the tracked box, y(t), the s(t) gauge and
+    the mode drawn on them."""
+
+    def __init__(self, path: str | Path, fps: float, size: tuple[int, int]) -> None:
+        self.writer = AnnotatedVideoWriter(Path(path), fps, size)
+
+    def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
+        self.writer.write(frame.image, result)
+
+    def close(self, summary: RunSummary) -> None:
+        self.writer.close()
+
+
+class ResultsSink(Sink):
+    """Every `FrameResult` kept in memory (tests, notebooks; a long drive is large)."""
+
+    def __init__(self) -> None:
+        self.results: list[FrameResult] = []
+
+    def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
+        self.results.append(result)

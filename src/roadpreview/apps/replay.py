@@ -1,0 +1,294 @@
+"""Replay a recording through the pipeline and write its outputs (``roadpreview replay``).
+
+A thin composition of the run loop: file sources (a recording folder in one argument,
+or a video with an optional ``frames.csv``, CAN logs and/or an IMU CSV) -> `Pipeline`
+-> file sinks, all in one output folder: ``alerts.blf`` (RP_ALERT, RP_ALERT_DETAIL,
+RP_CONFIRM, RP_STATUS, RP_ROAD_STATUS), ``alerts.jsonl``, ``frames.csv``,
+``plots.png``, ``summary.json`` and optionally ``annotated.mp4``. The sinks stream, so
+an interrupt (``stop``, set by SIGINT/SIGTERM in the CLI) keeps every alert emitted so
+far; the summary then says ``"interrupted": true``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from roadpreview.camera import CameraModel
+from roadpreview.errors import InputDataError
+from roadpreview.loop import Pace, RunSummary, run
+from roadpreview.pipeline.config import PipelineConfig
+from roadpreview.pipeline.pipeline import FrameResult, Pipeline
+from roadpreview.pipeline.truthmatch import MatchReport, match_alerts
+from roadpreview.sinks import Sink
+from roadpreview.sinks.can import CanLogSink
+from roadpreview.sinks.files import (
+    AlertsJsonlSink,
+    AnnotatedVideoSink,
+    FrameTableSink,
+    PlotSink,
+    ResultsSink,
+)
+from roadpreview.sources import Source
+from roadpreview.sources.can import CanLogSource, first_timestamp, make_decoder
+from roadpreview.sources.imu_csv import ImuCsvSource
+from roadpreview.sources.recording import RecordingFolder
+from roadpreview.sources.video import VideoFileSource
+from roadpreview.types import Alert, Confirmation, ConfirmationResult, FusionMode, RoadState
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class ReplayInputs:
+    """What to replay. Times of the video are ``video_start_s`` + frame time (log clock)."""
+
+    video: Path
+    camera: CameraModel
+    can_logs: list[Path] = field(default_factory=list)
+    imu_csv: Path | None = None
+    frames_csv: Path | None = None
+    video_start_s: float | None = None
+    truth_events: list[dict[str, Any]] | None = None
+    duration_s: float | None = None
+
+    @classmethod
+    def from_recording(cls, folder: str | Path) -> ReplayInputs:
+        """A recording folder: video, CAN log, calibration, clocks, truth."""
+        rec = RecordingFolder.open(folder)
+        return cls(
+            video=rec.video,
+            camera=rec.camera,
+            can_logs=[rec.can_log()],
+            frames_csv=rec.frames_csv,
+            video_start_s=rec.t0_unix_s,
+            truth_events=rec.events,
+            duration_s=rec.duration_s,
+        )
+
+    @property
+    def start_s(self) -> float:
+        """The time of the video's frame 0 on the log clock: ``video_start_s``, else the
+        first CAN frame's time, else 0."""
+        if self.video_start_s is not None:
+            return self.video_start_s
+        if self.can_logs:
+            return first_timestamp(self.can_logs[0])
+        return 0.0
+
+    def sources(self, config: PipelineConfig) -> tuple[VideoFileSource, list[Source]]:
+        """The video source (size checked against the calibration) and all sources."""
+        start = self.start_s
+        video = VideoFileSource(self.video, start_s=start, frames_csv=self.frames_csv)
+        video.check_size(self.camera.size)
+        sources: list[Source] = [video]
+        if self.can_logs:
+            decoder = make_decoder(config.can.dbc, config.can.mapping)
+            sources += [CanLogSource(p, decoder) for p in self.can_logs]
+        if self.imu_csv is not None:
+            sources.append(ImuCsvSource(self.imu_csv, offset_s=start))
+        return video, sources
+
+
+@dataclass
+class ReplayResult:
+    """What a replay did (`RunSummary` plus the replay's own findings)."""
+
+    run: RunSummary
+    video_start_s: float
+    out: Path | None
+    match: MatchReport | None = None
+    results: list[FrameResult] | None = None
+    video_name: str = ""  #: the video source's name (its errors are decode failures)
+
+    @property
+    def frames(self) -> int:
+        return self.run.frames
+
+    @property
+    def alerts(self) -> list[Alert]:
+        return self.run.alerts
+
+    @property
+    def confirmations(self) -> list[ConfirmationResult]:
+        return self.run.confirmations
+
+    @property
+    def mode_changes(self) -> list[tuple[float, FusionMode, str]]:
+        return self.run.mode_changes
+
+    @property
+    def seconds(self) -> float:
+        return self.run.seconds
+
+    @property
+    def fps(self) -> float:
+        return self.run.fps
+
+    @property
+    def interrupted(self) -> bool:
+        return self.run.interrupted
+
+    @property
+    def road(self) -> RoadState:
+        """The road class at the end."""
+        return self.run.last.road if self.run.last is not None else RoadState()
+
+    @property
+    def decode_failures(self) -> int:
+        """Video frames that could not be decoded."""
+        return self.run.source_errors.get(self.video_name, 0)
+
+    @property
+    def input_errors(self) -> int:
+        """Samples the CAN and IMU sources lost."""
+        errors = self.run.source_errors
+        return sum(n for name, n in errors.items() if name != self.video_name)
+
+
+def replay(
+    inputs: ReplayInputs,
+    config: PipelineConfig | None = None,
+    out: str | Path | None = None,
+    *,
+    annotated_video: bool = False,
+    keep_results: bool = False,
+    progress: Callable[[int, float], None] | None = None,
+    max_frames: int | None = None,
+    pace: Pace | None = None,
+    stop: threading.Event | None = None,
+) -> ReplayResult:
+    """Run the pipeline over the inputs; write the outputs into ``out`` (if given)."""
+    config = config or PipelineConfig()
+    video, sources = inputs.sources(config)
+    start = video.start_s
+    pipeline = Pipeline(inputs.camera, config)
+    out_dir = Path(out) if out is not None else None
+    sinks: list[Sink] = []
+    collected = ResultsSink() if keep_results else None
+    if collected is not None:
+        sinks.append(collected)
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        truth_times = [
+            start + float(e["lead_front_t_s"])
+            for e in inputs.truth_events or []
+            if e.get("lead_front_t_s") is not None and e.get("lead_hits")
+        ]
+        sinks += [
+            FrameTableSink(out_dir / "frames.csv"),
+            CanLogSink(out_dir / "alerts.blf", detector=config.anomaly.detector),
+            AlertsJsonlSink(out_dir / "alerts.jsonl"),
+            PlotSink(out_dir / "plots.png", t0=start, truth_times=truth_times),
+        ]
+        if annotated_video:
+            sinks.append(AnnotatedVideoSink(out_dir / "annotated.mp4", video.fps, video.size))
+    summary = run(
+        sources,
+        pipeline,
+        sinks,
+        pace=pace,
+        stop=stop,
+        status_period_s=config.can.status_period_s,
+        max_frames=max_frames,
+        progress=progress,
+    )
+    if summary.frames == 0:
+        raise InputDataError(f"{inputs.video}: no frame could be read")
+    match = None
+    if inputs.truth_events is not None:
+        duration = inputs.duration_s or (summary.last_t - start)
+        match = match_alerts(summary.alerts, inputs.truth_events, t0=start, duration_s=duration)
+    result = ReplayResult(
+        run=summary,
+        video_start_s=start,
+        out=out_dir,
+        match=match,
+        results=collected.results if collected is not None else None,
+        video_name=video.name,
+    )
+    if out_dir is not None:
+        write_summary(out_dir / "summary.json", result, config)
+    return result
+
+
+def write_summary(path: Path, result: ReplayResult, config: PipelineConfig) -> None:
+    """``summary.json``: counts, modes (times from the video's start), detector, road class,
+    confirmations, and the truth match when there is one."""
+    s = result.run
+    start = result.video_start_s
+    summary: dict[str, Any] = {
+        "frames": s.frames,
+        "seconds": round(s.seconds, 3),
+        "fps": round(s.fps, 2),
+        "alerts": len(s.alerts),
+        "interrupted": s.interrupted,
+        "video_decode_failures": result.decode_failures,
+        "can_input_errors": result.input_errors,
+        "frames_out_of_order": s.frames_out_of_order,
+        "mode_changes": [
+            {"t_s": round(t - start, 3), "mode": m.name, "reason": why}
+            for t, m, why in s.mode_changes
+        ],
+        "detector": config.anomaly.detector,
+        "road_class": result.road.iso_class,
+        "road_class_ego": result.road.ego_class,
+        "road_class_lead": result.road.lead_class,
+        "confirmations": {
+            c.name: sum(x.outcome is c for x in s.confirmations) for c in Confirmation
+        },
+        "pending_confirmations": len(s.alerts) - len(s.confirmations),
+    }
+    match = result.match
+    if match is not None:
+        summary["truth"] = {
+            "expected": match.expected,
+            "hits": match.hits,
+            "false_alarms": len(match.false_alarms),
+            "false_alarms_per_min": match.false_alarms_per_min,
+        }
+    path.write_text(json.dumps(summary, indent=2))
+
+
+def format_alerts(
+    alerts: Sequence[Alert], confirmations: Sequence[ConfirmationResult], t0: float
+) -> str:
+    """The alerts as a table (times from ``t0``), with the ego's confirmation of each."""
+    felt = {c.alert_id: c for c in confirmations}
+    lines = [
+        "   id  crossing  distance  arrives in   height            side   confidence  ego felt"
+    ]
+    for a in alerts:
+        c = felt.get(a.alert_id)
+        height = "      -       " if a.height_mm is None else f"{a.height_mm:+5.0f} mm"
+        if a.height_mm is not None and a.height_std_mm is not None:
+            height += f" ± {a.height_std_mm:3.0f}"
+        dist = "   -   " if a.distance_m is None else f"{a.distance_m:5.1f} m"
+        tta = "   -   " if a.time_to_arrival_s is None else f"{a.time_to_arrival_s:5.2f} s"
+        outcome = "pending" if c is None else c.outcome.name
+        if c is not None and math.isfinite(c.peak_mps2):
+            outcome += f" ({c.peak_mps2:.1f} m/s²)"
+        lines.append(
+            f"{a.alert_id:5d}  {a.t_s - t0:7.2f} s  {dist}  {tta}    {height:16s}  "
+            f"{a.side.name:5s}  {100 * a.confidence:8.0f} %  {outcome}"
+        )
+    return "\n".join(lines) if alerts else "   (none)"
+
+
+def print_progress(frames: int, seconds: float) -> None:
+    """A one-line progress display on stderr (frames and frames per second)."""
+    if sys.stderr.isatty():
+        print(
+            f"\r  {frames} frames, {frames / max(seconds, 1e-9):5.1f} fps", end="", file=sys.stderr
+        )
+
+
+def format_modes(modes: Sequence[tuple[float, FusionMode, str]], start: float) -> str:
+    return "\n".join(f"  {t - start:7.2f} s  {m.name:11s} {why}" for t, m, why in modes)

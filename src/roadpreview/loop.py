@@ -1,0 +1,467 @@
+"""The one run loop: sources -> pipeline -> sinks. Replay, the daemon, the evaluation and
+the batch replay are thin compositions of it (`roadpreview.apps`, `roadpreview.eval`).
+
+``run(sources, pipeline, sinks, pace=..., watchdogs=...)``:
+
+1. **Merge.** File sources are merged lazily in time-stamp order (one pending sample
+   per source; IMU and speed samples before a frame stamped at the same instant).
+   With a live source or a `Pace`, every source is read in a thread of its own into
+   one bounded queue; a sample is released in time order once the clock has passed
+   its stamp by ``latency_s`` (CAN frames stamped just before a frame may still be on
+   their way), so a live run sees the samples in the order a replay does. When the
+   pipeline falls behind, only the newest releasable camera frame is processed; the
+   others are dropped and counted (a camera does not queue).
+2. **Push** each sample into the pipeline. A camera frame not after the previous one is
+   skipped and counted. After each frame the loop hands the `FrameResult` and the
+   status to every sink, tracks the mode changes, and every ``status_period_s`` (on the
+   frames' clock) sends the status to every sink: one schedule for a bus and a log.
+3. **Watchdogs** see every sample and are polled while nothing arrives; they log, count,
+   and may inject samples (an image-less frame while the camera is lost).
+4. **End.** At the end of input, on ``stop`` (a signal) or on an error: the detector's
+   held-back events are flushed as alerts, and every sink is closed with the
+   `RunSummary` (``interrupted`` says whether the input was cut short).
+
+A sink that raises is logged and counted in ``summary.sink_errors``; it does not stop
+the run.
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+import math
+import queue
+import signal
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from types import FrameType
+from typing import Any, Protocol
+
+from roadpreview.pipeline.pipeline import FrameResult
+from roadpreview.pipeline.run_summary import FrameTimes, RunSummary
+from roadpreview.sinks import Sink
+from roadpreview.sources import Source, merge_key, merge_sources
+from roadpreview.types import (
+    Alert,
+    CameraFrame,
+    ImuSample,
+    Sample,
+    SpeedSample,
+    Status,
+)
+
+log = logging.getLogger(__name__)
+
+
+class Stage(Protocol):
+    """What the loop drives: `roadpreview.pipeline.Pipeline`, or the evaluation's fan-out
+    of several pipelines over one vision pass."""
+
+    #: samples the sources lost so far (the loop keeps it up to date, for the status)
+    input_errors: int
+
+    def push(self, sample: Sample) -> FrameResult | None: ...
+
+    def finish(self) -> list[Alert]: ...
+
+    def status(self) -> Status: ...
+
+
+class Watchdog(Protocol):
+    """Sees every sample the loop pushes; polled at least every ``poll_s`` while idle with
+    the time up to which samples have been released (the clock minus ``latency_s``)."""
+
+    def observe(self, sample: Sample) -> None: ...
+
+    def check(self, now_s: float) -> list[Sample]:
+        """Samples to push now (usually none)."""
+        ...
+
+
+@dataclass
+class Pace:
+    """Play at recorded speed (times ``rate``): sample time ``t`` is due at wall time
+    ``wall0 + (t - t0) / rate``. ``t0`` defaults to the first sample's time, ``wall0`` to
+    the moment the run starts; set both to line several players up on one clock."""
+
+    rate: float = 1.0
+    t0: float | None = None
+    wall0: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.rate > 0:
+            raise ValueError(f"pace rate {self.rate}: must be positive")
+        self._lock = threading.Lock()
+
+    def start(self, t0: float) -> None:
+        """Anchor the clock at the first sample (thread-safe; the first call wins)."""
+        with self._lock:
+            if self.t0 is None:
+                self.t0 = t0
+            if self.wall0 is None:
+                self.wall0 = time.time()
+
+    @property
+    def started(self) -> bool:
+        return self.t0 is not None and self.wall0 is not None
+
+    def due_in(self, t: float) -> float:
+        """Seconds until sample time ``t`` is due (negative: overdue)."""
+        return self._wall0() + (t - self._t0()) / self.rate - time.time()
+
+    def now(self) -> float:
+        """The sample clock now."""
+        return self._t0() + (time.time() - self._wall0()) * self.rate
+
+    def _t0(self) -> float:
+        if self.t0 is None:
+            raise RuntimeError("Pace.start was not called")
+        return self.t0
+
+    def _wall0(self) -> float:
+        if self.wall0 is None:
+            raise RuntimeError("Pace.start was not called")
+        return self.wall0
+
+
+class _End:
+    """A source thread's end marker."""
+
+    def __init__(self, source: Source) -> None:
+        self.source = source
+
+
+class _LiveMerge:
+    """Samples of threaded sources in time order, released ``latency_s`` after their
+    stamp on the clock (module docstring)."""
+
+    def __init__(
+        self,
+        sources: Sequence[Source],
+        *,
+        pace: Pace | None,
+        latency_s: float,
+        stop: threading.Event,
+        queue_size: int,
+    ) -> None:
+        self.sources = sources
+        self.pace = pace
+        self.latency_s = latency_s
+        self.stop = stop
+        self.queue: queue.Queue[Sample | _End] = queue.Queue(maxsize=queue_size)
+        self.queue_drops = 0
+        self._threads = [
+            threading.Thread(target=self._pump, args=(s,), name=f"source:{s.name}", daemon=True)
+            for s in sources
+        ]
+
+    def clock(self) -> float:
+        """The sample clock now (-inf while a pace has no anchor yet)."""
+        if self.pace is None:
+            return time.time()
+        return self.pace.now() if self.pace.started else -math.inf
+
+    def _put(self, item: Sample | _End) -> None:
+        while not self.stop.is_set():
+            try:
+                self.queue.put(item, timeout=0.1)
+                return
+            except queue.Full:
+                if not isinstance(item, _End):
+                    self.queue_drops += 1
+                    return
+
+    def _pump(self, source: Source) -> None:
+        try:
+            for sample in source:
+                if self.stop.is_set():
+                    return
+                if self.pace is not None and not source.live:
+                    self.pace.start(sample.t_s)
+                    wait = self.pace.due_in(sample.t_s)
+                    if wait > 0 and self.stop.wait(wait):
+                        return
+                self._put(sample)
+        except Exception:  # a source thread must not die silently
+            log.exception("event=source_failed source=%s", source.name)
+        finally:
+            self._put(_End(source))
+
+    def start(self) -> None:
+        for th in self._threads:
+            th.start()
+
+    def close(self) -> None:
+        for s in self.sources:
+            s.close()
+        for th in self._threads:
+            th.join(timeout=5.0)
+            if th.is_alive():
+                log.error("event=source_thread_hangs thread=%s", th.name)
+
+
+def run(
+    sources: Sequence[Source],
+    pipeline: Stage,
+    sinks: Sequence[Sink] = (),
+    *,
+    pace: Pace | None = None,
+    watchdogs: Sequence[Watchdog] = (),
+    stop: threading.Event | None = None,
+    status_period_s: float = 0.1,
+    latency_s: float = 0.0,
+    queue_size: int = 100_000,
+    poll_s: float = 0.05,
+    max_frames: int | None = None,
+    progress: Callable[[int, float], None] | None = None,
+    keep_running: bool = False,
+) -> RunSummary:
+    """Run the pipeline over the sources into the sinks (module docstring)."""
+    stop = stop or threading.Event()
+    summary = RunSummary()
+    state = _LoopState(pipeline, sinks, summary, status_period_s, sources)
+    wall0 = time.perf_counter()
+    live = pace is not None or any(s.live for s in sources)
+    merge: _LiveMerge | None = None
+    try:
+        if not live:
+            for sample in merge_sources(sources):
+                if stop.is_set():
+                    summary.interrupted = True
+                    break
+                state.push(sample, watchdogs)
+                if progress is not None and state.new_frame and summary.frames % 30 == 0:
+                    progress(summary.frames, time.perf_counter() - wall0)
+                if max_frames is not None and summary.frames >= max_frames:
+                    summary.interrupted = True
+                    break
+        else:
+            merge = _LiveMerge(
+                sources, pace=pace, latency_s=latency_s, stop=stop, queue_size=queue_size
+            )
+            merge.start()
+            _run_live(
+                merge, state, watchdogs, stop, poll_s, max_frames, progress, wall0, keep_running
+            )
+    except KeyboardInterrupt:  # Ctrl-C without a handler: stop like a signal does
+        summary.interrupted = True
+        log.warning("event=interrupted frames=%d", summary.frames)
+    except BaseException as exc:
+        summary.interrupted = True
+        summary.error = f"{type(exc).__name__}: {exc}"
+        raise
+    finally:
+        if merge is not None:
+            stop.set()
+            merge.close()
+            summary.queue_drops = merge.queue_drops
+        try:
+            state.finish()
+        finally:
+            summary.seconds = time.perf_counter() - wall0
+            summary.source_errors = {s.name: s.errors for s in sources}
+            for sink in sinks:
+                try:
+                    sink.close(summary)
+                except Exception:
+                    summary.sink_errors += 1
+                    log.exception("event=sink_close_failed sink=%s", type(sink).__name__)
+    return summary
+
+
+def _run_live(
+    merge: _LiveMerge,
+    state: _LoopState,
+    watchdogs: Sequence[Watchdog],
+    stop: threading.Event,
+    poll_s: float,
+    max_frames: int | None,
+    progress: Callable[[int, float], None] | None,
+    wall0: float,
+    keep_running: bool,
+) -> None:
+    summary = state.summary
+    heap: list[tuple[tuple[float, int], int, Sample]] = []
+    seq = 0
+    # a live source has no end; the run ends with the last file source (unless keep_running)
+    files_open = sum(not s.live for s in merge.sources)
+    ends_by_itself = files_open > 0 and not keep_running
+    while not stop.is_set():
+        # take what arrived (wait at most poll_s for the first item)
+        try:
+            item: Sample | _End | None = merge.queue.get(timeout=poll_s)
+        except queue.Empty:
+            item = None
+        while item is not None:
+            if isinstance(item, _End):
+                files_open -= not item.source.live
+            else:
+                if merge.pace is not None:
+                    merge.pace.start(item.t_s)  # a live source's first sample anchors it
+                heapq.heappush(heap, (merge_key(item), seq, item))
+                seq += 1
+            try:
+                item = merge.queue.get_nowait()
+            except queue.Empty:
+                item = None
+        ended = ends_by_itself and files_open == 0
+        horizon = math.inf if ended else merge.clock() - merge.latency_s
+        ready: list[Sample] = []
+        while heap and heap[0][2].t_s <= horizon:
+            ready.append(heapq.heappop(heap)[2])
+        frames = [i for i, s in enumerate(ready) if isinstance(s, CameraFrame)]
+        skip = set(frames[:-1]) if not ended else set()  # fell behind: only the newest frame
+        summary.frames_dropped += len(skip)
+        for i, sample in enumerate(ready):
+            if i in skip:
+                continue
+            state.push(sample, watchdogs)
+            if progress is not None and state.new_frame and summary.frames % 30 == 0:
+                progress(summary.frames, time.perf_counter() - wall0)
+            if max_frames is not None and summary.frames >= max_frames:
+                summary.interrupted = True
+                return
+        if ended:
+            return
+        if not ready:
+            for wd in watchdogs:  # on the released samples' clock
+                for sample in wd.check(horizon):
+                    state.push(sample, watchdogs, injected=True)
+    summary.interrupted = True
+
+
+class _LoopState:
+    """The per-sample step of `run`, shared by the file and the live merge."""
+
+    def __init__(
+        self,
+        pipeline: Stage,
+        sinks: Sequence[Sink],
+        summary: RunSummary,
+        status_period_s: float,
+        sources: Sequence[Source],
+    ) -> None:
+        self.pipeline = pipeline
+        self.sinks = sinks
+        self.summary = summary
+        self.period = status_period_s
+        self.sources = sources
+        self.next_status = -math.inf
+        self.last_t = -math.inf
+        self.new_frame = False
+
+    def _status(self) -> Status:
+        self.pipeline.input_errors = sum(s.errors for s in self.sources)
+        return replace(self.pipeline.status(), frames_processed=self.summary.frames)
+
+    def _each_sink(self, call: Callable[[Sink], None]) -> None:
+        for sink in self.sinks:
+            try:
+                call(sink)
+            except Exception:
+                self.summary.sink_errors += 1
+                log.exception("event=sink_failed sink=%s", type(sink).__name__)
+
+    def push(self, sample: Sample, watchdogs: Sequence[Watchdog], injected: bool = False) -> None:
+        self.new_frame = False
+        summary = self.summary
+        if not isinstance(sample, CameraFrame):
+            assert isinstance(sample, ImuSample | SpeedSample)
+            self.pipeline.push(sample)
+            summary.samples += 1
+            for wd in watchdogs:
+                wd.observe(sample)
+            return
+        if sample.t_s <= self.last_t:
+            if not injected:
+                summary.frames_out_of_order += 1
+                log.warning(
+                    "frame at %.6f s is not after the previous one (%.6f s); skipped",
+                    sample.t_s,
+                    self.last_t,
+                )
+                return
+            sample = replace(sample, t_s=self.last_t + 1e-3)
+        self.last_t = sample.t_s
+        for wd in watchdogs:
+            wd.observe(sample)
+        c0 = time.perf_counter()
+        r = self.pipeline.push(sample)
+        assert r is not None
+        if injected:
+            summary.injected_frames += 1
+        else:
+            summary.frames += 1
+            self.new_frame = True
+        if math.isnan(summary.first_t):
+            summary.first_t = sample.t_s
+        summary.last_t = sample.t_s
+        summary.last = r
+        modes = summary.mode_changes
+        if not modes or modes[-1][1] != r.mode:
+            why = r.pitch_reason or r.vision_reason
+            modes.append((r.t, r.mode, why))
+            log.info("event=mode_change t=%.3f mode=%s reason=%r", r.t, r.mode.name, why)
+        summary.alerts.extend(r.alerts)
+        summary.confirmations.extend(r.confirmations)
+        status = self._status()
+        self._each_sink(lambda s: s.on_frame(sample, r, status))
+        if r.t >= self.next_status:
+            self._each_sink(lambda s: s.on_status(r.t, status))
+            self.next_status = r.t + self.period
+        if not injected:
+            summary.frame_ms.add((time.perf_counter() - c0) * 1e3)
+
+    def finish(self) -> None:
+        """The end of input: the held-back events as alerts, to every sink."""
+        tail = self.pipeline.finish()
+        self.summary.alerts.extend(tail)
+        status = self._status()
+        t = self.last_t
+        if tail and math.isfinite(t):
+            self._each_sink(lambda s: s.on_flush(t, tail, status))
+            if t >= self.next_status:
+                self._each_sink(lambda s: s.on_status(t, status))
+                self.next_status = t + self.period
+
+
+@dataclass
+class SignalHandlers:
+    """SIGINT/SIGTERM set an event; `restore` puts the previous handlers back."""
+
+    event: threading.Event
+    previous: dict[int, Any] = field(default_factory=dict)
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        log.warning("event=signal name=%s", signal.Signals(signum).name)
+        self.event.set()
+
+    def install(self) -> SignalHandlers:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self.previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def restore(self) -> None:
+        for sig, handler in self.previous.items():
+            signal.signal(sig, handler)
+        self.previous.clear()
+
+
+def install_signal_handlers(event: threading.Event) -> SignalHandlers:
+    """SIGINT and SIGTERM set ``event`` (call from the main thread): the loop stops, the
+    pipeline is flushed and every sink closed."""
+    return SignalHandlers(event).install()
+
+
+__all__ = [
+    "FrameTimes",
+    "Pace",
+    "RunSummary",
+    "SignalHandlers",
+    "Stage",
+    "Watchdog",
+    "install_signal_handlers",
+    "run",
+]

@@ -1,0 +1,58 @@
+"""Sources: where typed, time-stamped samples (`roadpreview.types`) come from.
+
+Every source is an iterable of samples in time-stamp order, with a ``name`` for
+messages, an ``errors`` count of the samples it lost (undecodable frames,
+garbled CAN frames, bad rows) and ``close``. A source is *live* when its
+samples arrive by themselves (a camera device, a CAN bus): the run loop reads
+it in a thread of its own. A file source is read lazily, in the loop's thread.
+
+* `video`: a video file (one clock rule: ``frames.csv`` if given, else frame
+  index / fps, plus the start time), a camera device or stream, an image sequence;
+* `can`: a CAN log (any format python-can reads) or a live bus, decoded *in the
+  source* through the DBC and the input mapping into `ImuSample` / `SpeedSample`;
+* `imu_csv`: a phone-style IMU CSV;
+* `recording`: the recording folder format (video, frames.csv, CAN log, camera,
+  truth) that the simulator writes and replay reads.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Iterable, Iterator
+from typing import Protocol, runtime_checkable
+
+from roadpreview.types import CameraFrame, Sample
+
+
+@runtime_checkable
+class Source(Protocol):
+    """An iterable of samples in time-stamp order (module docstring)."""
+
+    #: what the source reads (a path, a device, a bus channel), for messages
+    name: str
+    #: True: samples arrive by themselves and the loop reads the source in a thread
+    live: bool
+
+    @property
+    def errors(self) -> int:
+        """Samples lost so far (logged where they were lost)."""
+        ...
+
+    def __iter__(self) -> Iterator[Sample]: ...
+
+    def close(self) -> None:
+        """Stop reading and release the device or file (idempotent)."""
+        ...
+
+
+def merge_key(sample: Sample) -> tuple[float, int]:
+    """Time order, and IMU/speed samples before a frame stamped at the same instant."""
+    return (sample.t_s, 1 if isinstance(sample, CameraFrame) else 0)
+
+
+def merge_sources(sources: Iterable[Iterable[Sample]]) -> Iterator[Sample]:
+    """All samples of file sources in time order, lazily (one pending sample per source)."""
+    return heapq.merge(*sources, key=merge_key)
+
+
+__all__ = ["Source", "merge_key", "merge_sources"]

@@ -1,0 +1,152 @@
+"""CAN sources: a log file (any format python-can reads) or a live bus, decoded *here*
+through the DBC and the input mapping into `ImuSample` / `SpeedSample`.
+
+Frames of unknown IDs are ignored; garbled frames, failed integrity checks and
+values out of the DBC's range are logged (once per kind) and counted in
+``errors``; nothing downstream sees ``can.Message``. A sample stamped before
+its predecessor in a log is dropped and counted (the log's order is kept).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections.abc import Iterator
+from dataclasses import replace
+from pathlib import Path
+
+import can
+
+from roadpreview.canbus.dbc import load_database
+from roadpreview.canbus.decode import CanInputDecoder
+from roadpreview.canbus.live import CanReceiver
+from roadpreview.canbus.logio import CanLogReader, read_can_log
+from roadpreview.canbus.mapping import load_mapping
+from roadpreview.errors import InputDataError
+from roadpreview.types import InputSample
+
+log = logging.getLogger(__name__)
+
+
+def make_decoder(dbc: str = "", mapping: str = "roadpreview") -> CanInputDecoder:
+    """The input decoder for a DBC file (empty: roadpreview's own) and a mapping (a file
+    or a shipped name); quantities the car does not provide are logged once."""
+    db = load_database(dbc or None, strict=not dbc)
+    decoder = CanInputDecoder(db, load_mapping(mapping), db_name=dbc or "roadpreview.dbc")
+    for quantity, why in decoder.missing.items():
+        log.warning("CAN input: %s is not available (%s)", quantity, why)
+    return decoder
+
+
+class CanLogSource:
+    """The samples of one CAN log, decoded (module docstring)."""
+
+    live = False
+
+    def __init__(
+        self, path: str | Path, decoder: CanInputDecoder, *, offset_s: float = 0.0
+    ) -> None:
+        self.path = Path(path)
+        self.name = str(self.path)
+        if not self.path.is_file():
+            raise InputDataError(f"{self.path}: CAN log not found")
+        self.decoder = decoder
+        self.offset_s = offset_s
+        self.out_of_order = 0  #: samples stamped before their predecessor (dropped)
+        self._reader: CanLogReader | None = None
+        self._closed = False
+
+    @property
+    def errors(self) -> int:
+        garbled = len(self._reader.problems) if self._reader is not None else 0
+        return self.decoder.stats.skipped + garbled + self.out_of_order
+
+    def __iter__(self) -> Iterator[InputSample]:
+        self._reader = CanLogReader(self.path)
+        last = -math.inf
+        for msg in self._reader:
+            if self._closed:
+                return
+            if msg.timestamp < last:
+                self.out_of_order += 1
+                log.warning(
+                    "%s: time stamp goes back %.3f s at %.6f; frame dropped",
+                    self.path,
+                    last - msg.timestamp,
+                    msg.timestamp,
+                )
+                continue
+            last = msg.timestamp
+            for sample in self.decoder.decode(msg):
+                yield sample if self.offset_s == 0.0 else _shifted(sample, self.offset_s)
+
+    def close(self) -> None:
+        self._closed = True
+
+
+def _shifted(sample: InputSample, offset_s: float) -> InputSample:
+    return replace(sample, t_s=sample.t_s + offset_s)
+
+
+class CanBusSource:
+    """The samples of a live bus, decoded as frames arrive (python-can's notifier thread
+    queues them, bounded; drops are counted). Live. The bus stays its owner's."""
+
+    live = True
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        decoder: CanInputDecoder,
+        *,
+        queue_size: int = 10_000,
+        poll_s: float = 0.05,
+    ) -> None:
+        self.bus = bus
+        self.name = f"CAN bus {bus.channel_info}"
+        self.decoder = decoder
+        self.queue_size = queue_size
+        self.poll_s = poll_s
+        self.frames = 0  #: frames received
+        self.receiver: CanReceiver | None = None
+        self._stop = threading.Event()
+
+    @property
+    def dropped(self) -> int:
+        """Frames lost because the receive queue was full."""
+        return self.receiver.dropped if self.receiver is not None else 0
+
+    @property
+    def receive_errors(self) -> int:
+        """Errors the bus reported."""
+        return self.receiver.listener.errors if self.receiver is not None else 0
+
+    @property
+    def errors(self) -> int:
+        return self.decoder.stats.skipped + self.dropped + self.receive_errors
+
+    def __iter__(self) -> Iterator[InputSample]:
+        self.receiver = CanReceiver(self.bus, maxsize=self.queue_size)
+        try:
+            while not self._stop.is_set():
+                msg = self.receiver.recv(timeout=self.poll_s)
+                if msg is None:
+                    continue
+                self.frames += 1
+                yield from self.decoder.decode(msg)
+        finally:
+            self.receiver.stop()
+
+    def close(self) -> None:
+        self._stop.set()
+
+
+def first_timestamp(path: str | Path) -> float:
+    """Time stamp of the first frame of a CAN log."""
+    for msg in read_can_log(path):
+        return float(msg.timestamp)
+    raise InputDataError(f"{path}: the CAN log holds no frame")
+
+
+__all__ = ["CanBusSource", "CanLogSource", "first_timestamp", "make_decoder"]

@@ -1,0 +1,42 @@
+"""A phone-style IMU CSV (``roadpreview.canbus.imu_csv`` reads the format) as a source of
+`ImuSample`, shifted by ``offset_s`` onto the pipeline's clock."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+from roadpreview.canbus.imu_csv import imu_samples, read_imu_csv
+from roadpreview.errors import InputDataError
+from roadpreview.types import ImuSample
+
+
+class ImuCsvSource:
+    """The rows of an IMU CSV as samples, time ``t_s + offset_s``; bad rows are skipped
+    (and logged) by the reader."""
+
+    live = False
+
+    def __init__(self, path: str | Path, *, offset_s: float = 0.0) -> None:
+        self.path = Path(path)
+        self.name = str(self.path)
+        if not self.path.is_file():
+            raise InputDataError(f"{self.path}: IMU CSV not found")
+        self.offset_s = offset_s
+        self._closed = False
+
+    @property
+    def errors(self) -> int:
+        return 0  # the reader refuses a file without a valid row and logs skipped rows
+
+    def __iter__(self) -> Iterator[ImuSample]:
+        for s in imu_samples(read_imu_csv(self.path), source=str(self.path)):
+            if self._closed:
+                return
+            yield ImuSample(s.t_s + self.offset_s, s.rates_rad_s, s.accel_m_s2, s.source)
+
+    def close(self) -> None:
+        self._closed = True
+
+
+__all__ = ["ImuCsvSource"]
