@@ -20,7 +20,8 @@ import pytest
 from roadpreview.camera import CameraModel
 from roadpreview.vision.base import U8, Detection, FrameContext
 from roadpreview.vision.frontend import FrameVision, VisionConfig, VisionFrontEnd
-from roadpreview.vision.motion import RearSearch, _masked_median, fit_rear
+from roadpreview.vision.motion import RearSearch, fit_rear
+from roadpreview.vision.motion.window import masked_median
 
 CAM = CameraModel.from_fov(320, 180, 54.0)
 LEAD = (130.0, 70.0, 190.0, 120.0)  # spans the centre column, bottom below the horizon
@@ -268,4 +269,4 @@ def test_masked_median_is_nanmedian_of_the_members() -> None:
             expected = np.nanmedian(np.where(member, values, np.nan), axis=2)
         if n == 0:
             expected = np.full((5, 3), np.nan)
-        assert np.array_equal(_masked_median(values, member), expected, equal_nan=True)
+        assert np.array_equal(masked_median(values, member), expected, equal_nan=True)

@@ -115,6 +115,18 @@ def to_small(points_full: NDArray[np.floating], scale: float) -> F64:
     return (np.asarray(points_full, np.float64) + 0.5) * scale - 0.5
 
 
+def box_to_full(box_small: Box, scale: float, width: int, height: int) -> Box:
+    """A small-image box in full-resolution pixels, clamped to a ``width`` x ``height`` image."""
+    lo = to_full(np.array([box_small[:2]]), scale)[0]
+    hi = to_full(np.array([box_small[2:]]), scale)[0]
+    return (
+        float(max(lo[0], 0.0)),
+        float(max(lo[1], 0.0)),
+        float(min(hi[0], width - 1.0)),
+        float(min(hi[1], height - 1.0)),
+    )
+
+
 @runtime_checkable
 class LeadFinder(Protocol):
     """Finds vehicles in a frame; the tracker picks the lead among them.
