@@ -15,13 +15,14 @@ from __future__ import annotations
 
 from roadpreview.vision.motion.config import MotionFinderConfig
 from roadpreview.vision.motion.finder import MotionDiagnostics, MotionLeadFinder, run_steps
-from roadpreview.vision.motion.rear import RearFit, RearSearch, fit_rear
+from roadpreview.vision.motion.rear import RearFit, RearFitConfig, RearSearch, fit_rear
 
 __all__ = [
     "MotionDiagnostics",
     "MotionFinderConfig",
     "MotionLeadFinder",
     "RearFit",
+    "RearFitConfig",
     "RearSearch",
     "fit_rear",
     "run_steps",

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from roadpreview.configtools import check_ranges, param
+from roadpreview.vision.motion.rear import RearFitConfig
 
 
 @dataclass(frozen=True)
@@ -147,3 +148,13 @@ class MotionFinderConfig:
 
     def validate(self, where: str = "MotionFinderConfig") -> None:
         check_ranges(self, where)
+
+    def rear_fit(self) -> RearFitConfig:
+        """The rear fit's settings (the ``rear_*`` fields; the rest keep their defaults)."""
+        return RearFitConfig(
+            min_width_m=self.rear_min_width_m,
+            max_width_m=self.rear_max_width_m,
+            rows_below=self.rear_rows_below,
+            centre_shift=self.rear_centre_shift,
+            aspect=self.rear_edge_aspect,
+        )

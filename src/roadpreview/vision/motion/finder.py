@@ -93,6 +93,7 @@ class MotionLeadFinder:
         self.camera = camera
         self.config = config or MotionFinderConfig()
         self.config.validate()
+        self._rear_fit = self.config.rear_fit()
         self.last_reason = ""
         self.diagnostics = MotionDiagnostics()
         self._history: deque[_History] = deque()
@@ -331,11 +332,7 @@ class MotionLeadFinder:
             v_horizon=v_h,
             f=f,
             height_m=self.camera.mount_height_m,
-            min_width_m=cfg.rear_min_width_m,
-            max_width_m=cfg.rear_max_width_m,
-            rows_below=cfg.rear_rows_below,
-            centre_shift=cfg.rear_centre_shift,
-            aspect=cfg.rear_edge_aspect,
+            config=self._rear_fit,
         )
         self.diagnostics.rear = fit
         if fit is None or fit.edge < cfg.rear_min_edge:

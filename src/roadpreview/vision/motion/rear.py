@@ -87,6 +87,28 @@ def _running_sum(g: NDArray[Any], axis: int) -> NDArray[np.int32]:
 
 
 @dataclass(frozen=True)
+class RearFitConfig:
+    """Settings of `fit_rear` (widths in m at the flat-road distance of the bottom row)."""
+
+    #: narrowest rear searched (m): a small car, less the horizon's uncertainty
+    min_width_m: float = 1.3
+    #: widest rear searched (m): a van is 2.0 m, a car's widest section is ahead of the contact
+    max_width_m: float = 2.6
+    #: the bottom is searched this far below the rough box (fraction of its width)
+    rows_below: float = 1.2
+    #: lateral search for the centre either side (fraction of the rough box's width)
+    centre_shift: float = 0.6
+    #: height of the band the side edges are measured over (fraction of the width)
+    aspect: float = 0.75
+    #: weight of the bottom line's score against the side edges'
+    bottom_weight: float = 1.0
+    #: the lowest row scoring at least this fraction of the best row's score wins
+    near_fraction: float = 0.7
+    #: height of the fitted box (fraction of its width)
+    height_ratio: float = 0.8
+
+
+@dataclass(frozen=True)
 class RearFit:
     """A vehicle rear fitted to the image (`fit_rear`), small-image pixels."""
 
@@ -103,14 +125,7 @@ def fit_rear(
     v_horizon: float,
     f: float,
     height_m: float,
-    min_width_m: float,
-    max_width_m: float,
-    rows_below: float,
-    centre_shift: float,
-    aspect: float,
-    bottom_weight: float = 1.0,
-    near_fraction: float = 0.7,
-    height_ratio: float = 0.8,
+    config: RearFitConfig | None = None,
 ) -> RearFit | None:
     """The vehicle rear near ``rough``: a box whose sides are the strongest pair of
     vertical edges (a rear is left-right symmetric: both sides must be strong), whose
@@ -120,9 +135,8 @@ def fit_rear(
 
     Hypotheses (bottom row x width x centre) are scored from running sums of the
     gradient images (vectorised, a few bottom rows at a time: `RearSearch`).
-    ``rows_below`` (fraction of the rough width) extends the bottom search below the
-    rough box, ``centre_shift`` (same unit) the lateral search; ``aspect`` is the height
-    of the edge band over the width.
+    ``v_horizon`` (row), ``f`` (px) and ``height_m`` (the camera's above the road) place
+    the flat road; ``config`` holds the search's settings (`RearFitConfig`).
     """
     search = RearSearch(
         img,
@@ -130,14 +144,7 @@ def fit_rear(
         v_horizon=v_horizon,
         f=f,
         height_m=height_m,
-        min_width_m=min_width_m,
-        max_width_m=max_width_m,
-        rows_below=rows_below,
-        centre_shift=centre_shift,
-        aspect=aspect,
-        bottom_weight=bottom_weight,
-        near_fraction=near_fraction,
-        height_ratio=height_ratio,
+        config=config,
     )
     search.score_rows()
     return search.result()
@@ -166,25 +173,19 @@ class RearSearch:
         v_horizon: float,
         f: float,
         height_m: float,
-        min_width_m: float,
-        max_width_m: float,
-        rows_below: float,
-        centre_shift: float,
-        aspect: float,
-        bottom_weight: float = 1.0,
-        near_fraction: float = 0.7,
-        height_ratio: float = 0.8,
+        config: RearFitConfig | None = None,
     ) -> None:
+        cfg = config or RearFitConfig()
         h, w = img.shape
         self._h, self._w = h, w
-        self._bottom_weight = bottom_weight
-        self._near_fraction = near_fraction
-        self._height_ratio = height_ratio
+        self._bottom_weight = cfg.bottom_weight
+        self._near_fraction = cfg.near_fraction
+        self._height_ratio = cfg.height_ratio
         x0, y0, x1, y1 = rough
         rw = max(x1 - x0, 4.0)
         xc0 = 0.5 * (x0 + x1)
         yb_lo = int(max(v_horizon + 2.0, y0 + 0.3 * (y1 - y0)))
-        yb_hi = int(min(h - 1, y1 + rows_below * rw))
+        yb_hi = int(min(h - 1, y1 + cfg.rows_below * rw))
         self._next = 0
         if yb_hi - yb_lo < 1:
             self.rows = 0
@@ -193,10 +194,10 @@ class RearSearch:
         d_c = f * height_m / np.maximum(ys - v_horizon, 1.0)
         nw = 24
         u = np.linspace(0.0, 1.0, nw)
-        w_lo = f * min_width_m / d_c
-        wid = w_lo[:, None] * (max_width_m / min_width_m) ** u[None, :]  # (Y, W)
+        w_lo = f * cfg.min_width_m / d_c
+        wid = w_lo[:, None] * (cfg.max_width_m / cfg.min_width_m) ** u[None, :]  # (Y, W)
         wid = np.minimum(wid, 0.95 * w)
-        shift = centre_shift * rw
+        shift = cfg.centre_shift * rw
         cs = xc0 + np.arange(-shift, shift + 0.5, max(1.0, shift / 30.0))  # (C,)
         self.rows = int(ys.size)
         self._ys, self._wid, self._cs = ys, wid, cs
@@ -213,7 +214,7 @@ class RearSearch:
         # shadow): rows r0 .. r1-1 per (bottom, width), their column sums from running sums
         yw = ys[:, None].astype(np.float64)
         r1 = np.clip(_round_index(yw - 0.15 * wid) + 1, 1, h)  # (Y, W)
-        r0 = np.clip(_round_index(yw - aspect * wid), 0, h - 1)
+        r0 = np.clip(_round_index(yw - cfg.aspect * wid), 0, h - 1)
         self._n_r = np.maximum(r1 - r0, 1)[:, :, None]
         ra, rb = int(r0.min()), int(max(r1.max(), r0.max()))
         # columns: every side and bottom-line end of every hypothesis (clipped to the image)
