@@ -136,9 +136,17 @@ class LeadFinder(Protocol):
     finder compares with an earlier frame) can keep it. Both take the shared
     `FrameContext` (built from the frame when None). Normal failure is an empty
     list, with ``last_reason`` saying why.
+
+    Optional, read by the front end when present: ``find_steps(frame, context)``, a
+    generator doing ``find`` in slices (the front end spreads them over frames); and
+    two class attributes it reads before building the finder (False when absent):
+    ``shares_small_image`` (the finder's config has ``small_width_px`` and works on the
+    front end's reduced image: it gets the front end's width unless its options set
+    one) and ``lead_at_any_distance`` (its detection is the lead however near: the
+    tracker's ``min_distance_m`` does not apply, e.g. the user's box).
     """
 
-    #: registry name ("onnx", "motion", "box")
+    #: registry name (`roadpreview.vision.FINDERS`: "motion", "onnx", "box")
     name: str
     #: why the last ``find`` returned nothing ("" when it found something)
     last_reason: str

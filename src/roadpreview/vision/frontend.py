@@ -21,7 +21,7 @@ import numpy as np
 
 from roadpreview.camera import CameraModel
 from roadpreview.configtools import check_ranges, param
-from roadpreview.vision import make_finder
+from roadpreview.vision import FINDERS, finder_class, make_finder
 from roadpreview.vision.background import (
     BackgroundConfig,
     BackgroundCorrespondences,
@@ -36,7 +36,7 @@ class VisionConfig:
     """Settings of the vision front end (``[vision]`` in the configuration)."""
 
     finder: str = param(
-        "motion", choices=("motion", "onnx", "box"), help="built-in motion finder needs no model"
+        "motion", choices=tuple(FINDERS), help="built-in motion finder needs no model"
     )
     finder_options: dict[str, Any] = field(default_factory=dict)
     small_width_px: int = param(
@@ -118,12 +118,14 @@ class VisionFrontEnd:
         self.camera = camera
         self.config = config or VisionConfig()
         self.config.validate()
+        # what the front end adapts to is declared by the finder's class (`LeadFinder`)
+        cls = finder_class(self.config.finder)
         options = dict(self.config.finder_options)
-        if self.config.finder == "motion":
+        if getattr(cls, "shares_small_image", False):
             options.setdefault("small_width_px", self.config.small_width_px)
         self.finder: LeadFinder = finder or make_finder(self.config.finder, camera, **options)
         tracker_cfg = self.config.tracker
-        if self.config.finder == "box":  # the user's box is the lead, however near
+        if getattr(cls, "lead_at_any_distance", False):
             tracker_cfg = replace(tracker_cfg, min_distance_m=0.0)
         self.tracker = LeadVehicleTracker(camera, tracker_cfg)
         self.background = BackgroundTracker(self.config.background)

@@ -42,7 +42,7 @@ import math
 from collections import deque
 from collections.abc import Generator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -88,6 +88,8 @@ class MotionLeadFinder:
     """Finds vehicles by their motion relative to the static scene (no model needed)."""
 
     name = "motion"
+    #: works on the front end's reduced image: takes its small_width_px
+    shares_small_image: ClassVar[bool] = True
 
     def __init__(self, camera: CameraModel, config: MotionFinderConfig | None = None) -> None:
         self.camera = camera
