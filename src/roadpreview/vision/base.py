@@ -53,10 +53,6 @@ class Detection:
     def height(self) -> float:
         return self.box[3] - self.box[1]
 
-    @property
-    def center(self) -> tuple[float, float]:
-        return (0.5 * (self.box[0] + self.box[2]), 0.5 * (self.box[1] + self.box[3]))
-
 
 @dataclass(frozen=True)
 class FrameContext:
@@ -187,10 +183,3 @@ def clip_box(box: Box, width: int, height: int) -> Box | None:
     if x1 - x0 < 1.0 or y1 - y0 < 1.0:
         return None
     return (x0, y0, x1, y1)
-
-
-def grow_box(box: Box, fraction: float, pixels: float = 0.0) -> Box:
-    """``box`` enlarged by ``fraction`` of its size plus ``pixels`` on every side."""
-    w, h = box[2] - box[0], box[3] - box[1]
-    dx, dy = fraction * w + pixels, fraction * h + pixels
-    return (box[0] - dx, box[1] - dy, box[2] + dx, box[3] + dy)

@@ -183,9 +183,6 @@ class MotionLeadFinder:
         self.last_reason = "" if dets else (self.last_reason or "no vehicle moves unlike the scene")
         return dets
 
-    def _find(self, img0: U8, img1: U8, ctx: FrameContext) -> list[Detection]:
-        return run_steps(self._find_steps(img0, img1, ctx))
-
     def _find_steps(
         self, img0: U8, img1: U8, ctx: FrameContext
     ) -> Generator[None, None, list[Detection]]:
