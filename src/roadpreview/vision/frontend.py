@@ -27,7 +27,7 @@ from roadpreview.vision.background import (
     BackgroundCorrespondences,
     BackgroundTracker,
 )
-from roadpreview.vision.base import Box, Detection, FrameContext, LeadFinder
+from roadpreview.vision.base import U8, Box, Detection, FrameContext, LeadFinder
 from roadpreview.vision.tracker import LeadObservation, LeadTrackerConfig, LeadVehicleTracker
 
 
@@ -149,7 +149,7 @@ class VisionFrontEnd:
         self._job_t = 0.0
         self._job_frames_left = 0
 
-    def check_frame(self, frame: Any) -> str:
+    def check_frame(self, frame: object) -> str:
         """Why ``frame`` cannot be used ('' when it can)."""
         cam = self.camera
         if frame is None:
@@ -167,7 +167,7 @@ class VisionFrontEnd:
             )
         return ""
 
-    def process(self, t: float, frame: Any, *, pitch_rad: float = 0.0) -> FrameVision:
+    def process(self, t: float, frame: U8 | None, *, pitch_rad: float = 0.0) -> FrameVision:
         """One frame (BGR uint8, the camera's size) at time ``t`` (s).
 
         ``pitch_rad`` is the camera's current pitch relative to rest if known
@@ -178,10 +178,11 @@ class VisionFrontEnd:
         index = self._index
         self._index += 1
         reason = self.check_frame(frame)
+        image = None if reason else frame  # a uint8 (H, W, 3) array of the camera's size
         ctx: FrameContext | None = None
-        if not reason:
+        if image is not None:
             ctx = FrameContext.from_frame(
-                frame,
+                image,
                 t=t,
                 index=index,
                 small_width=self.config.small_width_px,
@@ -190,7 +191,7 @@ class VisionFrontEnd:
             _, std = cv2.meanStdDev(ctx.small)
             if float(std[0, 0]) < self.config.min_frame_std:
                 reason = "blank frame (black or uniform)"
-        if reason or ctx is None:
+        if reason or ctx is None or image is None:
             return FrameVision(
                 t=t,
                 index=index,
@@ -201,7 +202,7 @@ class VisionFrontEnd:
 
         # the finder: when there is no target, else every redetect_s
         t1 = clock() if clock else 0.0
-        detections, detected_index, ran = self._finder_step(t, index, frame, ctx)
+        detections, detected_index, ran = self._finder_step(t, index, image, ctx)
         t2 = clock() if clock else 0.0
         lead = self.tracker.update(ctx, detections, detected_index=detected_index)
         t3 = clock() if clock else 0.0
@@ -232,7 +233,7 @@ class VisionFrontEnd:
         )
 
     def _finder_step(
-        self, t: float, index: int, frame: Any, ctx: FrameContext
+        self, t: float, index: int, frame: U8, ctx: FrameContext
     ) -> tuple[list[Detection] | None, int | None, bool]:
         """Start, continue or finish the finder's run on this frame.
 

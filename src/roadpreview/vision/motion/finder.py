@@ -42,13 +42,14 @@ import math
 from collections import deque
 from collections.abc import Generator
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from roadpreview.camera import CameraModel
 from roadpreview.pitch.robust_lm import RobustPitchConfig, RobustPitchEstimator
-from roadpreview.vision.base import U8, Box, Detection, FrameContext, box_to_full
+from roadpreview.vision.base import F64, U8, Box, Detection, FrameContext, box_to_full
 from roadpreview.vision.features import corner_strength, grid_features, track_fb
 from roadpreview.vision.motion.clusters import ClusterRecord, find_clusters
 from roadpreview.vision.motion.config import MotionFinderConfig
@@ -81,7 +82,8 @@ class MotionDiagnostics:
     yaw_rad: float = math.nan
     clusters: list[ClusterRecord] = field(default_factory=list)
     rear: RearFit | None = None
-    arrays: dict[str, Any] = field(default_factory=dict)
+    #: per point: positions ``a``, expansion ``e``, residual ``res`` and its ``tol``, ``odd``
+    arrays: dict[str, F64 | NDArray[np.bool_]] = field(default_factory=dict)
 
 
 class MotionLeadFinder:

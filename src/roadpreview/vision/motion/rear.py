@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from roadpreview.vision.base import F64, U8
+from roadpreview.vision.base import F32, F64, U8
 
 
 def refine_sides(
@@ -72,7 +71,7 @@ def _round_index(x: F64) -> NDArray[np.intp]:
     return np.rint(x, out=x).astype(np.intp)
 
 
-def _running_sum(g: NDArray[Any], axis: int) -> NDArray[np.int32]:
+def _running_sum(g: F32, axis: int) -> NDArray[np.int32]:
     """Running sum of an integer-valued gradient image along ``axis`` with a leading 0:
     ``out[k] - out[j]`` is the sum over ``j .. k-1`` (exact: |sums| < 2^31)."""
     gi = g.astype(np.int32)
@@ -205,9 +204,10 @@ class RearSearch:
         # brighter below)
         sm = cv2.GaussianBlur(img, (3, 3), 0)
         gx = np.abs(cv2.Sobel(sm, cv2.CV_32F, 1, 0, ksize=3))
-        gx = cv2.dilate(gx, np.ones((1, 3), np.uint8))  # an edge one column off still counts
-        gy = cv2.Sobel(sm, cv2.CV_32F, 0, 1, ksize=3)
-        gy = cv2.dilate(gy, np.ones((3, 1), np.uint8))
+        # an edge one column off still counts
+        gx = np.asarray(cv2.dilate(gx, np.ones((1, 3), np.uint8)), np.float32)
+        gy = np.asarray(cv2.Sobel(sm, cv2.CV_32F, 0, 1, ksize=3), np.float32)
+        gy = np.asarray(cv2.dilate(gy, np.ones((3, 1), np.uint8)), np.float32)
         self._sx = float(np.mean(gx[int(max(v_horizon, 0)) :, :])) + 1e-6
         self._sy = float(np.mean(np.abs(gy[int(max(v_horizon, 0)) :, :]))) + 1e-6
         # the sides between the tyres' top and the rear's upper part (below: tyres,
