@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Generator
+from dataclasses import asdict
 
 import cv2
 import numpy as np
@@ -20,7 +21,8 @@ import pytest
 from roadpreview.camera import CameraModel
 from roadpreview.vision.base import U8, Detection, FrameContext
 from roadpreview.vision.frontend import FrameVision, VisionConfig, VisionFrontEnd
-from roadpreview.vision.motion import RearSearch, _masked_median, fit_rear
+from roadpreview.vision.motion import MotionFinderConfig, RearFitConfig, RearSearch, fit_rear
+from roadpreview.vision.motion.window import masked_median
 
 CAM = CameraModel.from_fov(320, 180, 54.0)
 LEAD = (130.0, 70.0, 190.0, 120.0)  # spans the centre column, bottom below the horizon
@@ -233,23 +235,15 @@ def _car_scene(seed: int) -> tuple[U8, tuple[float, float, float, float]]:
 @pytest.mark.parametrize("seed", range(8))
 def test_rear_search_gives_the_plain_scoring_in_any_slicing(seed: int) -> None:
     img, rough = _car_scene(seed)
-    kw = dict(
-        v_horizon=179.5,
-        f=353.0,
-        height_m=1.3,
-        min_width_m=1.3,
-        max_width_m=2.6,
-        rows_below=1.2,
-        centre_shift=0.6,
-        aspect=0.75,
-    )
-    plain = _fit_rear_plain(img, rough, **kw)
-    fit = fit_rear(img, rough, **kw)
+    geometry = dict(v_horizon=179.5, f=353.0, height_m=1.3)
+    config = RearFitConfig()  # the plain scoring has its defaults built in
+    plain = _fit_rear_plain(img, rough, **geometry, **asdict(config))
+    fit = fit_rear(img, rough, **geometry, config=config)
     assert plain is not None
     assert fit is not None
     assert fit.box == plain[0]  # the same numbers, not just close ones
     assert (fit.score, fit.edge, fit.bottom) == plain[1:]
-    search = RearSearch(img, rough, **kw)
+    search = RearSearch(img, rough, **geometry, config=config)
     while not search.done:
         assert search.result() is None  # rows left: no answer yet
         search.score_rows(7)
@@ -268,4 +262,10 @@ def test_masked_median_is_nanmedian_of_the_members() -> None:
             expected = np.nanmedian(np.where(member, values, np.nan), axis=2)
         if n == 0:
             expected = np.full((5, 3), np.nan)
-        assert np.array_equal(_masked_median(values, member), expected, equal_nan=True)
+        assert np.array_equal(masked_median(values, member), expected, equal_nan=True)
+
+
+def test_the_finder_builds_its_rear_fit_settings_from_its_config() -> None:
+    assert MotionFinderConfig().rear_fit() == RearFitConfig()  # the same defaults
+    cfg = MotionFinderConfig(rear_min_width_m=1.2, rear_edge_aspect=0.6, rear_rows_below=1.0)
+    assert cfg.rear_fit() == RearFitConfig(min_width_m=1.2, aspect=0.6, rows_below=1.0)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import builtins
 import math
+from dataclasses import fields
 from typing import Any
 
 import numpy as np
@@ -14,7 +15,7 @@ from roadpreview.errors import ConfigError, MissingDependencyError
 from roadpreview.vision import FINDERS, make_finder
 from roadpreview.vision.base import Detection
 from roadpreview.vision.frontend import VisionConfig, VisionFrontEnd
-from roadpreview.vision.tracker import LeadVehicleTracker, choose_target
+from roadpreview.vision.tracker import LeadTrackerConfig, LeadVehicleTracker, choose_target
 
 CAM = CameraModel.from_fov(320, 180, 54.0)
 
@@ -144,3 +145,20 @@ def test_distance_cues_and_their_fusion() -> None:
     assert math.isnan(dg2)
     _, _, dw3, _ = tr.distance((0.0, box[1], box[2], box[3]), 2.0)
     assert math.isnan(dw3)
+
+
+def test_the_config_accepts_every_registered_finder_and_only_those() -> None:
+    choices = {f.name: f for f in fields(VisionConfig)}["finder"].metadata["choices"]
+    assert choices == tuple(FINDERS)
+    with pytest.raises(ConfigError, match="must be one of"):
+        VisionConfig(finder="yolo").validate()
+
+
+def test_the_front_end_adapts_to_what_the_finder_class_declares() -> None:
+    motion = VisionFrontEnd(CAM, VisionConfig(finder="motion", small_width_px=200))
+    assert motion.finder.config.small_width_px == 200  # type: ignore[attr-defined]
+    assert motion.tracker.config.min_distance_m == LeadTrackerConfig().min_distance_m
+    box = VisionFrontEnd(
+        CAM, VisionConfig(finder="box", finder_options={"box": (100, 80, 200, 150)})
+    )
+    assert box.tracker.config.min_distance_m == 0.0  # the user's box, however near

@@ -17,13 +17,14 @@ import importlib
 from typing import Any
 
 from roadpreview.camera import CameraModel
+from roadpreview.errors import ConfigError
 from roadpreview.registry import build
 from roadpreview.vision.base import Detection, FrameContext, LeadFinder
 
-#: config name -> (module, class, config class)
+#: config name -> (module, class, config class); the config's and the CLI's choices
 FINDERS: dict[str, tuple[str, str, str]] = {
-    "onnx": ("roadpreview.vision.onnx", "OnnxLeadFinder", "OnnxFinderConfig"),
     "motion": ("roadpreview.vision.motion", "MotionLeadFinder", "MotionFinderConfig"),
+    "onnx": ("roadpreview.vision.onnx", "OnnxLeadFinder", "OnnxFinderConfig"),
     "box": ("roadpreview.vision.box", "BoxLeadFinder", "BoxFinderConfig"),
 }
 
@@ -34,6 +35,19 @@ def make_finder(name: str, camera: CameraModel, **options: Any) -> LeadFinder:
         FINDERS, name, camera, key="vision.finder", where=f"vision.{name}", options=options
     )
     return finder
+
+
+def finder_class(name: str) -> type:
+    """The class registered as ``name`` (its module imported now), to read the class-level
+    traits the front end needs before building the finder (see `LeadFinder`)."""
+    try:
+        module_name, cls_name, _ = FINDERS[name]
+    except KeyError:
+        raise ConfigError(
+            f"vision.finder = {name!r}: unknown; choose one of {sorted(FINDERS)}"
+        ) from None
+    cls: type = getattr(importlib.import_module(module_name), cls_name)
+    return cls
 
 
 def __getattr__(name: str) -> Any:
@@ -64,5 +78,6 @@ __all__ = [
     "LeadVehicleTracker",
     "VisionConfig",
     "VisionFrontEnd",
+    "finder_class",
     "make_finder",
 ]

@@ -53,10 +53,6 @@ class Detection:
     def height(self) -> float:
         return self.box[3] - self.box[1]
 
-    @property
-    def center(self) -> tuple[float, float]:
-        return (0.5 * (self.box[0] + self.box[2]), 0.5 * (self.box[1] + self.box[3]))
-
 
 @dataclass(frozen=True)
 class FrameContext:
@@ -115,6 +111,18 @@ def to_small(points_full: NDArray[np.floating], scale: float) -> F64:
     return (np.asarray(points_full, np.float64) + 0.5) * scale - 0.5
 
 
+def box_to_full(box_small: Box, scale: float, width: int, height: int) -> Box:
+    """A small-image box in full-resolution pixels, clamped to a ``width`` x ``height`` image."""
+    lo = to_full(np.array([box_small[:2]]), scale)[0]
+    hi = to_full(np.array([box_small[2:]]), scale)[0]
+    return (
+        float(max(lo[0], 0.0)),
+        float(max(lo[1], 0.0)),
+        float(min(hi[0], width - 1.0)),
+        float(min(hi[1], height - 1.0)),
+    )
+
+
 @runtime_checkable
 class LeadFinder(Protocol):
     """Finds vehicles in a frame; the tracker picks the lead among them.
@@ -124,9 +132,17 @@ class LeadFinder(Protocol):
     finder compares with an earlier frame) can keep it. Both take the shared
     `FrameContext` (built from the frame when None). Normal failure is an empty
     list, with ``last_reason`` saying why.
+
+    Optional, read by the front end when present: ``find_steps(frame, context)``, a
+    generator doing ``find`` in slices (the front end spreads them over frames); and
+    two class attributes it reads before building the finder (False when absent):
+    ``shares_small_image`` (the finder's config has ``small_width_px`` and works on the
+    front end's reduced image: it gets the front end's width unless its options set
+    one) and ``lead_at_any_distance`` (its detection is the lead however near: the
+    tracker's ``min_distance_m`` does not apply, e.g. the user's box).
     """
 
-    #: registry name ("onnx", "motion", "box")
+    #: registry name (`roadpreview.vision.FINDERS`: "motion", "onnx", "box")
     name: str
     #: why the last ``find`` returned nothing ("" when it found something)
     last_reason: str
@@ -167,10 +183,3 @@ def clip_box(box: Box, width: int, height: int) -> Box | None:
     if x1 - x0 < 1.0 or y1 - y0 < 1.0:
         return None
     return (x0, y0, x1, y1)
-
-
-def grow_box(box: Box, fraction: float, pixels: float = 0.0) -> Box:
-    """``box`` enlarged by ``fraction`` of its size plus ``pixels`` on every side."""
-    w, h = box[2] - box[0], box[3] - box[1]
-    dx, dy = fraction * w + pixels, fraction * h + pixels
-    return (box[0] - dx, box[1] - dy, box[2] + dx, box[3] + dy)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 from roadpreview.camera import CameraModel
 from roadpreview.configtools import param
@@ -34,6 +35,8 @@ class BoxLeadFinder:
     """Hands the user's box to the tracker once."""
 
     name = "box"
+    #: the user's box is the lead however near (the tracker's min_distance_m does not apply)
+    lead_at_any_distance: ClassVar[bool] = True
 
     def __init__(self, camera: CameraModel, config: BoxFinderConfig | None = None) -> None:
         self.camera = camera

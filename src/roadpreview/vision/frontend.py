@@ -21,13 +21,13 @@ import numpy as np
 
 from roadpreview.camera import CameraModel
 from roadpreview.configtools import check_ranges, param
-from roadpreview.vision import make_finder
+from roadpreview.vision import FINDERS, finder_class, make_finder
 from roadpreview.vision.background import (
     BackgroundConfig,
     BackgroundCorrespondences,
     BackgroundTracker,
 )
-from roadpreview.vision.base import Box, Detection, FrameContext, LeadFinder
+from roadpreview.vision.base import U8, Box, Detection, FrameContext, LeadFinder
 from roadpreview.vision.tracker import LeadObservation, LeadTrackerConfig, LeadVehicleTracker
 
 
@@ -36,7 +36,7 @@ class VisionConfig:
     """Settings of the vision front end (``[vision]`` in the configuration)."""
 
     finder: str = param(
-        "motion", choices=("motion", "onnx", "box"), help="built-in motion finder needs no model"
+        "motion", choices=tuple(FINDERS), help="built-in motion finder needs no model"
     )
     finder_options: dict[str, Any] = field(default_factory=dict)
     small_width_px: int = param(
@@ -118,12 +118,14 @@ class VisionFrontEnd:
         self.camera = camera
         self.config = config or VisionConfig()
         self.config.validate()
+        # what the front end adapts to is declared by the finder's class (`LeadFinder`)
+        cls = finder_class(self.config.finder)
         options = dict(self.config.finder_options)
-        if self.config.finder == "motion":
+        if getattr(cls, "shares_small_image", False):
             options.setdefault("small_width_px", self.config.small_width_px)
         self.finder: LeadFinder = finder or make_finder(self.config.finder, camera, **options)
         tracker_cfg = self.config.tracker
-        if self.config.finder == "box":  # the user's box is the lead, however near
+        if getattr(cls, "lead_at_any_distance", False):
             tracker_cfg = replace(tracker_cfg, min_distance_m=0.0)
         self.tracker = LeadVehicleTracker(camera, tracker_cfg)
         self.background = BackgroundTracker(self.config.background)
@@ -147,7 +149,7 @@ class VisionFrontEnd:
         self._job_t = 0.0
         self._job_frames_left = 0
 
-    def check_frame(self, frame: Any) -> str:
+    def check_frame(self, frame: object) -> str:
         """Why ``frame`` cannot be used ('' when it can)."""
         cam = self.camera
         if frame is None:
@@ -165,7 +167,7 @@ class VisionFrontEnd:
             )
         return ""
 
-    def process(self, t: float, frame: Any, *, pitch_rad: float = 0.0) -> FrameVision:
+    def process(self, t: float, frame: U8 | None, *, pitch_rad: float = 0.0) -> FrameVision:
         """One frame (BGR uint8, the camera's size) at time ``t`` (s).
 
         ``pitch_rad`` is the camera's current pitch relative to rest if known
@@ -176,10 +178,11 @@ class VisionFrontEnd:
         index = self._index
         self._index += 1
         reason = self.check_frame(frame)
+        image = None if reason else frame  # a uint8 (H, W, 3) array of the camera's size
         ctx: FrameContext | None = None
-        if not reason:
+        if image is not None:
             ctx = FrameContext.from_frame(
-                frame,
+                image,
                 t=t,
                 index=index,
                 small_width=self.config.small_width_px,
@@ -188,7 +191,7 @@ class VisionFrontEnd:
             _, std = cv2.meanStdDev(ctx.small)
             if float(std[0, 0]) < self.config.min_frame_std:
                 reason = "blank frame (black or uniform)"
-        if reason or ctx is None:
+        if reason or ctx is None or image is None:
             return FrameVision(
                 t=t,
                 index=index,
@@ -199,7 +202,7 @@ class VisionFrontEnd:
 
         # the finder: when there is no target, else every redetect_s
         t1 = clock() if clock else 0.0
-        detections, detected_index, ran = self._finder_step(t, index, frame, ctx)
+        detections, detected_index, ran = self._finder_step(t, index, image, ctx)
         t2 = clock() if clock else 0.0
         lead = self.tracker.update(ctx, detections, detected_index=detected_index)
         t3 = clock() if clock else 0.0
@@ -230,7 +233,7 @@ class VisionFrontEnd:
         )
 
     def _finder_step(
-        self, t: float, index: int, frame: Any, ctx: FrameContext
+        self, t: float, index: int, frame: U8, ctx: FrameContext
     ) -> tuple[list[Detection] | None, int | None, bool]:
         """Start, continue or finish the finder's run on this frame.
 

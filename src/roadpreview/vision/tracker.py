@@ -330,7 +330,7 @@ class LeadVehicleTracker:
     def horizon_v(self, pitch_rad: float = 0.0) -> float:
         """Row of the horizon: the FOE's row moved down by f tan(pitch)."""
         cam = self.camera
-        return cam.fy * cam.t[1] / cam.t[2] + cam.cy + cam.fy * math.tan(pitch_rad)
+        return float(cam.fy * cam.t[1] / cam.t[2] + cam.cy + cam.fy * math.tan(pitch_rad))
 
     def _grid(self, gray: NDArray[np.uint8], box: Box, mask: NDArray[np.bool_] | None) -> F32:
         """Grid points over the mask, or the inner part of the box, on textured pixels."""
