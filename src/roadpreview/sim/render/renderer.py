@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from roadpreview.camera import CameraModel
 from roadpreview.configtools import check_ranges, param
 from roadpreview.errors import ConfigError, InputDataError
-from roadpreview.sim.scene import (
+from roadpreview.sim.scene.textures import (
     LAYER_ROADSIDE,
     QuadSet,
     SceneLayout,
