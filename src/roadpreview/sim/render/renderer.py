@@ -418,11 +418,6 @@ class SceneRenderer:
         R = self._mount @ _R_BASE @ rb.T
         return R, np.array([cam.x_m, cam.y_m, cam.z_m])
 
-    def project_world(self, cam: CameraPose, points: F64) -> F64:
-        """(N, 3) world points to (N, 2) pixels (NaN behind the camera)."""
-        R, C = self.world_to_camera(cam)
-        return self.camera.project((np.asarray(points, np.float64).reshape(-1, 3) - C) @ R.T)
-
     @staticmethod
     def vehicle_points_world(pose: VehiclePose, body_points: F64) -> F64:
         """Body-frame points (relative to the CG) of a vehicle to world coordinates."""
