@@ -632,7 +632,8 @@ class BodyMotion:
 
     def point_world(self, t: float, offsets_body: ArrayLike) -> FloatArray:
         """World positions (k, 3) at time ``t`` of body-fixed points (k, 3) from the CG."""
-        return self.points_world([t], offsets_body)[0]
+        out: FloatArray = self.points_world([t], offsets_body)[0]
+        return out
 
 
 def simulate_vehicle(
