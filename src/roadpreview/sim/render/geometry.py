@@ -14,32 +14,13 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from roadpreview.sim.frames import body_to_world
 from roadpreview.sim.types import CameraPose, VehiclePose, VehicleShape
 
 F64 = NDArray[np.float64]
 
 #: world (X fwd, Y left, Z up) -> camera (x right, y down, z forward) for a level camera
 R_BASE = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
-
-
-def _rot_x(a: float) -> F64:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _rot_y(a: float) -> F64:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def _rot_z(a: float) -> F64:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def body_to_world(pitch: float, roll: float, yaw: float) -> F64:
-    """Rotation of a body (X fwd, Y left, Z up) with pitch nose-up, roll left-up, yaw left."""
-    return _rot_z(yaw) @ _rot_y(-pitch) @ _rot_x(roll)
 
 
 def mount_rotation(forward: F64) -> F64:
@@ -114,7 +95,7 @@ def footprint(pose: VehiclePose, z: float) -> F64:
     rr, ff = -shape.cg_to_rear_m - 0.1, shape.cg_to_front_m + 0.1
     w = shape.width_m / 2 + 0.1
     foot: F64 = np.array([[rr, w, 0.0], [ff, w, 0.0], [ff, -w, 0.0], [rr, -w, 0.0]])
-    foot = foot @ _rot_z(pose.yaw_rad).T + np.array([pose.x_m, pose.y_m, 0.0])
+    foot = foot @ body_to_world(0.0, 0.0, pose.yaw_rad).T + np.array([pose.x_m, pose.y_m, 0.0])
     foot[:, 2] = z
     return foot
 

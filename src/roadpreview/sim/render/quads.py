@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from roadpreview.sim.frames import body_to_world
 from roadpreview.sim.render.geometry import (
     VehicleGeometry,
-    body_to_world,
     footprint,
     vehicle_points_world,
 )
