@@ -35,7 +35,7 @@ from roadpreview.sim.render.geometry import (
 )
 from roadpreview.sim.render.quads import DrawListBuilder, DrawQuads
 from roadpreview.sim.render.raster import Canvas, Rasterizer
-from roadpreview.sim.scene import SceneLayout, Texture, VehicleTextures
+from roadpreview.sim.scene import SceneLayout, Texture
 from roadpreview.sim.types import CameraPose, Conditions, VehiclePose
 
 F64 = NDArray[np.float64]
@@ -99,10 +99,6 @@ class SceneRenderer:
     def world_to_camera(self, cam: CameraPose) -> tuple[F64, F64]:
         """(R, C) with p_cam = R @ (p_world - C) for the camera pose ``cam``."""
         return world_to_camera(self._mount, cam)
-
-    def vehicle_textures(self, pose: VehiclePose) -> VehicleTextures:
-        """The (cached) textures of a vehicle's appearance."""
-        return self._draw.vehicles.textures(pose)
 
     def render(
         self,
