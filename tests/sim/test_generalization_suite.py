@@ -27,6 +27,7 @@ from roadpreview.sim.render import SceneRenderer
 from roadpreview.sim.road import Anomaly, generate_road
 from roadpreview.sim.scenario import ScenarioConfig
 from roadpreview.sim.scene import generate_scene
+from roadpreview.sim.types import Conditions
 from roadpreview.sim.vehicle import VehicleParams
 
 SUITE = generalization(seed=0)
@@ -319,11 +320,12 @@ def test_van_lead_renders_at_its_size() -> None:
         length_m=x_cam + 300.0,
         road_height=lambda x, y: float(drive.road.slow_height(x, y)),
     )
+    fog, light, tunnel = cfg.visibility(t)
+    conditions = Conditions(
+        fog_density_per_m=float(fog[0]), light=float(light[0]), tunnel=bool(tunnel[0])
+    )
     frame = SceneRenderer(camera, scene, cfg.render).render(
-        drive.camera_pose_at(t),
-        drive.vehicles_at(t),
-        cfg.conditions_at(t),
-        np.random.default_rng(0),
+        drive.camera_pose_at(t), drive.vehicles_at(t), conditions, np.random.default_rng(0)
     )
     assert frame.image.shape == (360, 640, 3)
     assert frame.lead_box is not None

@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 
-from roadpreview.errors import InputDataError
 from roadpreview.sim.presets import preset
 from roadpreview.sim.recording import write_recording
 from roadpreview.sim.scenario import CameraSpec, ScenarioConfig
@@ -269,26 +268,3 @@ def _same_scenario(folder: Path, cfg: ScenarioConfig) -> bool:
     except Exception:  # a half-written or foreign folder is regenerated
         return False
 
-
-def load_dataset(root: str | Path) -> list[Clip]:
-    """Read ``dataset.json`` back into clips."""
-    path = Path(root) / "dataset.json"
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputDataError(
-            f"{path}: no data set index (build it with roadpreview simulate --dataset)"
-        ) from None
-    except json.JSONDecodeError as exc:
-        raise InputDataError(f"{path}: not valid JSON: {exc}") from None
-    out = []
-    for i, c in enumerate(data["clips"]):
-        fields: dict[str, Any] = {
-            k: (math.nan if v is None and k in ("height_m", "lead_distance_m") else v)
-            for k, v in c.items()
-        }
-        try:
-            out.append(Clip(**fields))
-        except TypeError as exc:
-            raise InputDataError(f"{path}: clips[{i}]: {exc}") from None
-    return out

@@ -140,14 +140,6 @@ class Anomaly:
             return self.start_x_m + 0.5 * self.effective_wavelength_m
         return self.start_x_m + 0.5 * self.length_m
 
-    @property
-    def left_y_m(self) -> float:
-        return self.center_y_m + 0.5 * self.width_m
-
-    @property
-    def right_y_m(self) -> float:
-        return self.center_y_m - 0.5 * self.width_m
-
     def covers_y(self, y: ArrayLike) -> NDArray[np.bool_]:
         """Whether lateral positions Y lie within the anomaly's lateral extent."""
         y_arr = np.asarray(y, dtype=float)

@@ -24,7 +24,6 @@ from roadpreview.sim.imu import IMU_PRESETS, ImuConfig, SpeedSensorConfig
 from roadpreview.sim.motion import MotionConfig
 from roadpreview.sim.render import RenderConfig
 from roadpreview.sim.scene import SceneConfig
-from roadpreview.sim.types import Conditions
 
 
 @dataclass(frozen=True)
@@ -191,12 +190,6 @@ class ScenarioConfig:
             else:
                 tunnel |= (tt >= seg.start_s) & (tt < seg.end_s)
         return fog, light, tunnel
-
-    def conditions_at(self, t: float) -> Conditions:
-        fog, light, tunnel = self.visibility(t)
-        return Conditions(
-            fog_density_per_m=float(fog[0]), light=float(light[0]), tunnel=bool(tunnel[0])
-        )
 
     # -- files --------------------------------------------------------------------
     @classmethod

@@ -24,6 +24,7 @@ from scipy.signal import lfilter
 
 from roadpreview.configtools import check_ranges, param
 from roadpreview.errors import ConfigError, InputDataError
+from roadpreview.sim.frames import body_to_world
 from roadpreview.sim.road import Road
 from roadpreview.sim.types import VehiclePose, VehicleShape
 
@@ -502,25 +503,6 @@ def wheel_road_inputs(
 # -- the motion of one vehicle ------------------------------------------------------------
 
 
-def _rotation(yaw: FloatArray, pitch: FloatArray, roll: FloatArray) -> FloatArray:
-    """Body-to-world rotations (n, 3, 3): R = Rz(yaw) Ry(-pitch) Rx(roll), body x forward,
-    y left, z up; pitch nose up and roll left side up are positive (``docs/method.md``)."""
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    cr, sr = np.cos(roll), np.sin(roll)
-    r = np.empty((*np.shape(yaw), 3, 3))
-    r[..., 0, 0] = cy * cp
-    r[..., 0, 1] = -sy * cr - cy * sp * sr
-    r[..., 0, 2] = sy * sr - cy * sp * cr
-    r[..., 1, 0] = sy * cp
-    r[..., 1, 1] = cy * cr - sy * sp * sr
-    r[..., 1, 2] = -cy * sr - sy * sp * cr
-    r[..., 2, 0] = sp
-    r[..., 2, 1] = cp * sr
-    r[..., 2, 2] = cp * cr
-    return r
-
-
 _SERIES = (
     "t",
     "x",
@@ -626,13 +608,14 @@ class BodyMotion:
         (k, 3), given from the CG in the body frame (x forward, y left, z up)."""
         off = np.asarray(offsets_body, dtype=float).reshape(-1, 3)
         s = self.sample(times)
-        rot = _rotation(s.yaw, s.pitch, s.roll)
+        rot = body_to_world(s.pitch, s.roll, s.yaw)
         centre = np.column_stack([s.x, s.y, s.z])
         return np.asarray(centre[:, None, :] + np.einsum("nij,kj->nki", rot, off))
 
     def point_world(self, t: float, offsets_body: ArrayLike) -> FloatArray:
         """World positions (k, 3) at time ``t`` of body-fixed points (k, 3) from the CG."""
-        return self.points_world([t], offsets_body)[0]
+        out: FloatArray = self.points_world([t], offsets_body)[0]
+        return out
 
 
 def simulate_vehicle(
