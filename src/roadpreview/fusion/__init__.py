@@ -28,7 +28,7 @@ BACKENDS: dict[str, tuple[str, str, str | None]] = {
     ),
     "visual-only": ("roadpreview.fusion.baselines", "VisualOnlyPitch", "VisualOnlyConfig"),
     "imu-only": ("roadpreview.fusion.baselines", "ImuOnlyPitch", "ImuOnlyConfig"),
-    "none": ("roadpreview.fusion.baselines", "NoCompensation", None),
+    "none": ("roadpreview.fusion.baselines", "ZeroPitchFusion", None),
 }
 
 

@@ -42,7 +42,7 @@ from roadpreview.errors import InputDataError
 from roadpreview.fusion.base import FusedPitch, VisualPitch
 from roadpreview.fusion.config import FusionConfig
 from roadpreview.fusion.gyro import GyroHistory, Motion, RejectCounter
-from roadpreview.fusion.modes import ModeSupervisor, VisionTrust
+from roadpreview.fusion.mode_machine import ModeSupervisor, VisionTrust
 from roadpreview.fusion.timesync import TimeOffsetEstimator
 from roadpreview.types import FusionMode
 

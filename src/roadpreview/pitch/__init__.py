@@ -24,7 +24,7 @@ ESTIMATORS: dict[str, tuple[str, str, str | None]] = {
         "EssentialMatrixPitchEstimator",
         "EssentialPitchConfig",
     ),
-    "none": ("roadpreview.pitch.none", "NoCompensation", None),
+    "none": ("roadpreview.pitch.zero", "ZeroPitchEstimator", None),
 }
 
 
