@@ -13,19 +13,21 @@ from __future__ import annotations
 
 from typing import Any
 
-from roadpreview.fusion.base import FusedPitch, PitchFusion, VisualPitch
+from roadpreview.fusion.base import (
+    FusedPitch,
+    PitchBackEnd,
+    PitchFusion,
+    RewindableBackEnd,
+    VisualPitch,
+)
 from roadpreview.fusion.compensation import compensation
 from roadpreview.registry import build
 from roadpreview.types import FusionMode
 
-#: config name -> (module, class, config class)
+#: config name -> (module, class or factory taking the config, config class)
 BACKENDS: dict[str, tuple[str, str, str | None]] = {
-    "kalman": ("roadpreview.fusion.kalman", "GyroPitchKalmanFilter", "KalmanConfig"),
-    "factor-graph": (
-        "roadpreview.fusion.factor_graph",
-        "GyroPitchFixedLagSmoother",
-        "FactorGraphConfig",
-    ),
+    "kalman": ("roadpreview.fusion.kalman", "kalman_fusion", "KalmanConfig"),
+    "factor-graph": ("roadpreview.fusion.factor_graph", "factor_graph_fusion", "FactorGraphConfig"),
     "visual-only": ("roadpreview.fusion.baselines", "VisualOnlyPitch", "VisualOnlyConfig"),
     "imu-only": ("roadpreview.fusion.baselines", "ImuOnlyPitch", "ImuOnlyConfig"),
     "none": ("roadpreview.fusion.baselines", "ZeroPitchFusion", None),
@@ -50,7 +52,9 @@ __all__ = [
     "BACKENDS",
     "FusedPitch",
     "FusionMode",
+    "PitchBackEnd",
     "PitchFusion",
+    "RewindableBackEnd",
     "VisualPitch",
     "compensation",
     "make_fusion",
