@@ -42,15 +42,22 @@ per frame for everything, gyro buffering, alignment and modes included) is
 less than filterpy's ``update`` alone (25-30 µs in CPython: argument checks,
 copies of x and P, a deepcopy of z, seven dense 6x6 products for a scalar
 measurement). Both are written out for the structure of the problem, without
-allocating arrays:
+allocating arrays. Measured when the back end was split out of the fusion (10k
+frames of prediction, clone and one update, best of 3): 6.8 µs per frame here,
+29.7 µs through ``KalmanFilter.predict`` and ``update``; the whole ``kalman``
+fusion on the 20 s bench drive ran at 166k IMU samples/s, and at 29k calling
+filterpy (below the 100k target), with outputs equal to 5e-16.
+``test_frame_sequence_equals_filterpy`` runs both on a random sequence of frames
+and keeps x and P within 1e-12 (relative) of filterpy's after every call:
 
 * prediction, ``F = I - ΔM e0 e1ᵀ``: only row and column 0 and the (phi, b)
   block change, a dozen scalars (``test_prediction_equals_filterpy_predict_at_imu_rate``);
   single entries are read and written through a memoryview of the
   ``array('d')``, at a third of the cost of numpy's item access. Per frame the
   prediction and the clone of the new frame are one pass (`step`: the new
-  row 0 is written to the clone's row and column as it is computed; the same
-  numbers as `_advance` then `_clone`, ``test_step_equals_advance_then_frame``);
+  row 0 is written to the clone's row and column as it is computed), which is
+  filterpy's ``predict`` with ``F`` and ``Q`` premultiplied by the clone's copy
+  matrix;
 * update, scalar z and ``h = e0 - e_j``, in Joseph form as the issue asks:
   ``u = P hᵀ``, ``S = h u + R``, ``K = u S⁻¹`` as filterpy forms them, and
   ``(I - K h) P (I - K h)ᵀ + K R Kᵀ`` expanded for the rank-one h as
@@ -270,42 +277,13 @@ class GyroPitchKalmanFilter:
         self._t = t0
         self._clone(t0)
 
-    def _advance(self, t: float, dG: float, dV: float, dM: float) -> None:
-        """x <- F x + B u, P <- F P F' + Q with F = I - ΔM e0 e1', u = ΔG and Q the white
-        rate noise ΔV plus the bias walk q_b [[ΔM³/3, -ΔM²/2], [-ΔM²/2, Δt]] (filterpy's
-        predict written out for the structure of F: row and column 0 and the (phi, b) block;
-        P is exactly symmetric, so column 0 is row 0)."""
-        kf = self.kf
-        if kf.P is not self._Pa or kf.x is not self._xa:
-            self._bind()
-        st, n = self._sv, self._n
-        m = n + 1  # P[i, j] = st[i m + j], x[i] = st[i m + n]
-        st[n] = st[n] + (dG - dM * st[m + n])  # phi += ΔG - ΔM b
-        qb = self._q_bias
-        if dM != 0.0:
-            # P[0, :] -= ΔM P[1, :], P[:, 0] -= ΔM P[:, 1]: column 0 is the new row 0, except
-            # at (0, 0), where both apply; then Q
-            p01 = st[1] - dM * st[m + 1]
-            st[0] = ((st[0] - dM * st[m]) - dM * p01) + (dV + qb * dM * dM * dM / 3.0)
-            p01 = p01 - qb * dM * dM / 2.0
-            st[1] = p01
-            st[m] = p01
-            for i in range(2, n):
-                v = st[i] - dM * st[m + i]
-                st[i] = v
-                st[i * m] = v
-        else:
-            st[0] = st[0] + (dV + qb * dM * dM * dM / 3.0)
-            p01 = st[1] - qb * dM * dM / 2.0
-            st[1] = p01
-            st[m] = p01
-        st[m + 1] = st[m + 1] + qb * (t - self._t)
-        self._t = t
-
     def step(self, t: float, dG: float, dV: float, dM: float) -> None:
-        """`_advance` then `_clone` (the per-frame call) in one pass, the same numbers:
-        the predicted row 0 goes to the new clone's row and column 0 to its column as they
-        are computed."""
+        """Predict to frame ``t`` and clone phi there, in one pass: x <- F x + B u,
+        P <- F P F' + Q with F = I - ΔM e0 e1', u = ΔG and Q the white rate noise ΔV plus
+        the bias walk q_b [[ΔM³/3, -ΔM²/2], [-ΔM²/2, Δt]] (filterpy's predict written out
+        for the structure of F: row and column 0 and the (phi, b) block; P is exactly
+        symmetric, so column 0 is row 0); the predicted row 0 goes to the new clone's row
+        and column 0 to its column as they are computed."""
         kf = self.kf
         if kf.P is not self._Pa or kf.x is not self._xa:
             self._bind()
