@@ -438,15 +438,9 @@ class GyroPitchKalmanFilter:
         return st[n], st[0], st[m + n], st[m + 1]
 
     def frame_estimate(self, t: float) -> tuple[float, float] | None:
-        """(phi, variance) of frame ``t`` from its clone, if it still has one."""
-        if t not in self._slots:
-            return None
-        kf = self.kf
-        if kf.P is not self._Pa or kf.x is not self._xa:
-            self._bind()
-        m = self._n + 1
-        j = 2 + self._slots.index(t)
-        return self._sv[j * m + self._n], self._sv[j * m + j]
+        """None: the fusion rewinds this back end (`snapshot`) instead of extrapolating
+        from earlier frames, so it never needs them."""
+        return None
 
     def take_level_shift(self) -> float:
         shift, self._shift = self._shift, 0.0

@@ -249,11 +249,6 @@ class StreamingPitchFusion:
         return out
 
     @property
-    def time_offset(self) -> float:
-        """The applied camera-IMU offset (IMU stamp minus camera time), s."""
-        return self._tau
-
-    @property
     def stats(self) -> dict[str, int]:
         """Counts of rejected, bridged, reordered and gated inputs by kind."""
         return dict(self.events.counts)
