@@ -11,8 +11,6 @@ Back ends are chosen by name from `BACKENDS` (imported lazily)::
 
 from __future__ import annotations
 
-from typing import Any
-
 from roadpreview.fusion.base import (
     FusedPitch,
     PitchBackEnd,
@@ -34,7 +32,7 @@ BACKENDS: dict[str, tuple[str, str, str | None]] = {
 }
 
 
-def make_fusion(name: str, **options: Any) -> PitchFusion:
+def make_fusion(name: str, **options: object) -> PitchFusion:
     """Build the back end registered as ``name``; ``options`` fill its config dataclass
     (nested tables as dicts: ``gyro={"noise_density": ...}``)."""
     fusion: PitchFusion = build(

@@ -27,14 +27,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 from roadpreview.fusion.gyro import RejectCounter
 from roadpreview.pitch.base import PitchEstimate
 from roadpreview.types import FusionMode
 
 
-def _slot_setters(cls: type) -> tuple[Callable[[Any, Any], None], ...]:
+def _slot_setters(cls: type) -> tuple[Callable[[object, object], None], ...]:
     """The slot setters of a dataclass's fields, in field order.
 
     `VisualPitch` and `FusedPitch` are made once per frame. The ``__init__`` that

@@ -38,11 +38,12 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import SupportsFloat, SupportsIndex, SupportsInt, cast
 
 import gtsam
 import numpy as np
+from numpy.typing import NDArray
 
 from roadpreview.fusion.base import BackEndEstimate, VisualPitch
 from roadpreview.fusion.config import FactorGraphConfig
@@ -50,6 +51,13 @@ from roadpreview.fusion.gyro import Motion, RejectCounter
 from roadpreview.fusion.streaming import StreamingPitchFusion
 
 _MIN_SIGMA = 1e-9  # rad: floor of every noise sigma (an interval of zero length)
+
+Array = NDArray[np.float64]
+#: the error function of a `gtsam.CustomFactor` (gtsam's stubs give its signature)
+_ErrorFunction = Callable[[gtsam.CustomFactor, gtsam.Values, gtsam.JacobianVector | None], Array]
+_Smoother = gtsam.IncrementalFixedLagSmoother | gtsam.BatchFixedLagSmoother
+#: key -> stamp as the smoothers' `update` is typed (its Mapping's key type is invariant)
+_Stamps = Mapping[SupportsInt | SupportsIndex, SupportsFloat | SupportsIndex]
 
 
 def X(k: int) -> int:
@@ -64,13 +72,13 @@ _MINUS_ONE = np.array([[-1.0]])
 _ONE = np.array([[1.0]])
 
 
-def _gyro_error(k0: int, k1: int, kb: int, d_g: float, d_m: float) -> Callable[..., Any]:
+def _gyro_error(k0: int, k1: int, kb: int, d_g: float, d_m: float) -> _ErrorFunction:
     """Error of the gyro between-factor: x_k - x_{k-1} - (ΔG - ΔM b); its Jacobians are
     constant (the model is linear)."""
     h_b = np.array([[d_m]])
 
-    def error(this: gtsam.CustomFactor, v: gtsam.Values, H: list[Any] | None) -> Any:
-        e = v.atVector(k1) - v.atVector(k0) - d_g + d_m * v.atVector(kb)
+    def error(this: gtsam.CustomFactor, v: gtsam.Values, H: gtsam.JacobianVector | None) -> Array:
+        e: Array = v.atVector(k1) - v.atVector(k0) - d_g + d_m * v.atVector(kb)
         if H is not None:
             H[0] = _MINUS_ONE
             H[1] = _ONE
@@ -80,12 +88,12 @@ def _gyro_error(k0: int, k1: int, kb: int, d_g: float, d_m: float) -> Callable[.
     return error
 
 
-def _joint_prior_error(keys: list[int], mean: np.ndarray) -> Callable[..., Any]:
+def _joint_prior_error(keys: list[int], mean: Array) -> _ErrorFunction:
     """Error of a joint Gaussian prior on several 1-vector variables (bounded rebuild)."""
     n = mean.size
     jac = [np.eye(n)[:, i : i + 1] for i in range(n)]
 
-    def error(this: gtsam.CustomFactor, v: gtsam.Values, H: list[Any] | None) -> Any:
+    def error(this: gtsam.CustomFactor, v: gtsam.Values, H: gtsam.JacobianVector | None) -> Array:
         x = np.array([v.atVector(k)[0] for k in keys])
         if H is not None:
             for i in range(n):
@@ -118,7 +126,7 @@ class GyroPitchFixedLagSmoother:
         self._reset()
 
     # -- smoother ---------------------------------------------------------------------------
-    def _new_smoother(self) -> Any:
+    def _new_smoother(self) -> _Smoother:
         if self.config.smoother == "batch":
             return gtsam.BatchFixedLagSmoother(self.config.lag_s)
         params = gtsam.ISAM2Params()
@@ -129,10 +137,10 @@ class GyroPitchFixedLagSmoother:
         params.findUnusedFactorSlots = True  # reuse the slots of removed factors (no growth)
         return gtsam.IncrementalFixedLagSmoother(self.config.lag_s, params)
 
-    def _noise(self, sigma: float) -> Any:
+    def _noise(self, sigma: float) -> gtsam.noiseModel.Isotropic:
         return gtsam.noiseModel.Isotropic.Sigma(1, max(sigma, _MIN_SIGMA))
 
-    def _robust(self, sigma: float) -> Any:
+    def _robust(self, sigma: float) -> gtsam.noiseModel.Base:
         base = self._noise(sigma)
         loss = self.config.robust_loss
         if loss == "none":
@@ -147,7 +155,7 @@ class GyroPitchFixedLagSmoother:
 
     # -- PitchBackEnd -----------------------------------------------------------------------
     def _reset(self) -> None:
-        self.smoother: Any = None
+        self.smoother: _Smoother = self._new_smoother()
         self._k = -1  # newest pitch state
         self._j = 0  # current bias state
         self._bias_t = -math.inf  # when it was added
@@ -174,9 +182,8 @@ class GyroPitchFixedLagSmoother:
 
     def start(self, t0: float) -> None:
         """phi = 0 at the first frame ``t0`` (a tight prior), the configured bias prior."""
-        self._reset()
+        self._reset()  # (a new smoother)
         g = self.config.gyro
-        self.smoother = self._new_smoother()
         self._last_rebuild = t0
         self._k = 0
         self._key_of[t0] = 0
@@ -219,7 +226,9 @@ class GyroPitchFixedLagSmoother:
             self._bias_t = t
         self._phi = pred  # until the smoother says otherwise
 
-    def _gyro_factor(self, x0: int, x1: int, b0: int, mo: Motion, pred: float) -> Any:
+    def _gyro_factor(
+        self, x0: int, x1: int, b0: int, mo: Motion, pred: float
+    ) -> gtsam.NonlinearFactor:
         """x1 - x0 - (ΔG - ΔM b0), sigma sqrt(ΔV): a `gtsam.CustomFactor`, or (default) the
         same linear factor held in C++ (`LinearContainerFactor` of a `JacobianFactor` at the
         current estimate), which the smoother evaluates without calling back into Python."""
@@ -289,7 +298,7 @@ class GyroPitchFixedLagSmoother:
             if kp is not None and X(kp) in self._times
             else None
         )
-        self.smoother.update(self._graph, self._values, self._stamps)
+        self.smoother.update(self._graph, self._values, cast(_Stamps, self._stamps))
         self.n_updates += 1
         self._restamp(self._stamps)
         self._frame_cache.clear()
@@ -374,7 +383,7 @@ class GyroPitchFixedLagSmoother:
             )
         )
         stamps = dict.fromkeys(keys, t)
-        self.smoother.update(graph, values, stamps)
+        self.smoother.update(graph, values, cast(_Stamps, stamps))
         self._times = OrderedDict()
         self._restamp(stamps)
         self._key_of = {tf: kk for tf, kk in self._key_of.items() if X(kk) in keys}

@@ -82,7 +82,8 @@ from __future__ import annotations
 
 import math
 from array import array
-from typing import Any, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple, Protocol, cast, overload
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
@@ -94,6 +95,41 @@ from roadpreview.fusion.gyro import RejectCounter
 from roadpreview.fusion.streaming import StreamingPitchFusion
 
 Array = NDArray[np.float64]
+
+
+class _Doubles(Protocol):
+    """A memoryview of float64 as it behaves (typeshed types memoryview items as int):
+    single entries (a 0-d view by ``()``) are floats, slices are views."""
+
+    @overload
+    def __getitem__(self, key: int | tuple[()]) -> float: ...
+    @overload
+    def __getitem__(self, key: slice) -> _Doubles: ...
+    @overload
+    def __setitem__(self, key: int | tuple[()], value: float) -> None: ...
+    @overload
+    def __setitem__(self, key: slice, value: _Doubles) -> None: ...
+
+
+def _doubles(view: memoryview[int] | memoryview[float]) -> _Doubles:
+    """``view`` (format ``d``) typed as what it holds."""
+    return cast(_Doubles, view)
+
+
+class _FilterState(Protocol):
+    """What this back end uses of filterpy's (untyped) ``KalmanFilter``."""
+
+    dim_x: int
+    x: Array
+    P: Array
+    inv: Callable[[Array], Array]
+
+
+#: the work buffers of `GyroPitchKalmanFilter._update` (`_make_buffers`)
+_UpdateBuffers = tuple[
+    Array, Array, Array, Array, Array, _Doubles, _Doubles, Array,
+    NDArray[np.intp], Array, Array, Array, Array, Array, Array, Array,
+]  # fmt: skip
 
 
 def _inv_1x1(s: Array) -> Array:
@@ -132,7 +168,7 @@ class GyroPitchKalmanFilter:
         self._q_bias = self.config.gyro.bias_random_walk**2
         n = 2 + self.config.n_clones
         self._n = n
-        self.kf = KalmanFilter(dim_x=n, dim_z=1)
+        self.kf: _FilterState = KalmanFilter(dim_x=n, dim_z=1)
         self.kf.inv = _inv_1x1  # for a caller of kf.update: the 1x1 S needs no matrix inverse
         self._make_buffers()
         self._gate2 = self.config.gate_sigma**2
@@ -165,11 +201,11 @@ class GyroPitchKalmanFilter:
         self._MM0, self._MM1 = self._MM[0], self._MM[1]
         self._dXP = np.empty((n, n + 1))  # the change of [P | x]
         # single entries through memoryviews (as `_sv`), flat for the change
-        self._s0v: Any = self._s0.data
-        self._Bv: Any = self._Bf.data
-        self._dv: Any = self._dXP.data.cast("B").cast("d")
+        self._s0v = _doubles(self._s0.data)
+        self._Bv = _doubles(self._Bf.data)
+        self._dv = _doubles(self._dXP.data.cast("B").cast("d"))
         # all of them for `_update`, read in one attribute load
-        self._ubuf: tuple[Any, ...] = (
+        self._ubuf: _UpdateBuffers = (
             self._u,
             self._un,
             self._K,
@@ -215,7 +251,7 @@ class GyroPitchKalmanFilter:
         "_sv",
     )
 
-    def __getstate__(self) -> dict[str, Any]:
+    def __getstate__(self) -> dict[str, object]:
         """Copies and pickles keep the storage, not the views into it (a copied numpy view
         would no longer share memory with the copied storage); `__setstate__` remakes them."""
         state = self.__dict__.copy()
@@ -223,7 +259,7 @@ class GyroPitchKalmanFilter:
             state.pop(name, None)
         return state
 
-    def __setstate__(self, state: dict[str, Any]) -> None:
+    def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
         self._make_buffers()
         self._install(self._st)
@@ -240,8 +276,7 @@ class GyroPitchKalmanFilter:
         kf = self.kf
         kf.P, kf.x = xp[:, :n], xp[:, n:]
         self._st, self._xp, self._Pa, self._xa = st, xp, kf.P, kf.x
-        # typed Any: typeshed gives memoryview items as int, these are float64
-        self._sv: Any = memoryview(st)
+        self._sv = _doubles(memoryview(st))
         self._rows = [xp[i] for i in range(n)]  # [P[i, :], x[i]]
 
     def _bind(self) -> None:
