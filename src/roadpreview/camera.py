@@ -239,13 +239,6 @@ class CameraModel:
         y = (px[:, 1] - self.cy) / self.fy
         return np.stack([x, y, np.ones_like(x)], axis=1)
 
-    def horizon_shift_px(self, pitch_rad: float | NDArray[np.float64]) -> Any:
-        """Image displacement ``f tan(phi)`` caused by a camera pitch ``phi``.
-
-        Positive pitch is nose up, which moves image content *down* (larger y).
-        """
-        return self.fy * np.tan(pitch_rad)
-
     def scaled(self, width: int, height: int) -> CameraModel:
         """The same camera for an image resized to ``width x height``."""
         sx = width / self.width

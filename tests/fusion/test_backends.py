@@ -108,9 +108,12 @@ def test_factor_graph_long_run_stays_bounded() -> None:
     (upstream reports growth and crashes), the pitch stays right."""
     from roadpreview.bench.fusion import synthetic_drive
     from roadpreview.fusion import VisualPitch
+    from roadpreview.fusion.factor_graph import GyroPitchFixedLagSmoother, factor_graph_fusion
 
     events, frames, truth = synthetic_drive(600.0, 3, camera_hz=10.0)
-    f = make_fusion("factor-graph")
+    f = factor_graph_fusion()
+    smoother = f.backend
+    assert isinstance(smoother, GyroPitchFixedLagSmoother)
     sizes: list[int] = []
     errs: list[float] = []
     f.estimate(0.0)
@@ -127,11 +130,11 @@ def test_factor_graph_long_run_stays_bounded() -> None:
             out = f.estimate(p[0])
             errs.append(out.phi - truth[k])
             if k % 500 == 0:
-                sizes.append(int(f.smoother.getFactors().size()))  # type: ignore[attr-defined]
+                sizes.append(int(smoother.smoother.getFactors().size()))
     assert k == frames.size - 1
     assert max(sizes) == min(sizes[2:]) or max(sizes) - min(sizes) < 20
     assert max(sizes) < 200
-    assert len(f._key_of) < 40  # type: ignore[attr-defined]
+    assert len(smoother._key_of) < 40
     e = np.degrees(np.abs(np.array(errs)))
     assert np.all(np.isfinite(e))
     # texture is lost 2 s in every 20 s; the drift of 30 losses accumulates, slowly

@@ -12,7 +12,7 @@ from filterpy.kalman import KalmanFilter
 from roadpreview.fusion import VisualPitch, make_fusion
 from roadpreview.fusion.config import AlignmentConfig, GyroConfig, KalmanConfig
 from roadpreview.fusion.gyro import GyroHistory
-from roadpreview.fusion.kalman import GyroPitchKalmanFilter
+from roadpreview.fusion.kalman import GyroPitchKalmanFilter, kalman_fusion
 
 DEG = math.pi / 180.0
 
@@ -44,11 +44,11 @@ def test_prediction_equals_filterpy_predict_at_imu_rate() -> None:
         )
 
     kf = GyroPitchKalmanFilter(KalmanConfig(gyro=cfg))
-    kf._bk_init(t[0])
+    kf.start(float(t[0]))
     kf.kf.x[:2] = [[0.01], [0.002]]
     kf.kf.P[:2, :2] = np.diag([1e-6, 1e-5])
-    kf._t = float(t[0])
-    kf._bk_propagate(float(t[-1]), g.motion(float(t[0]), float(t[-1])))
+    mo = g.motion(float(t[0]), float(t[-1]))
+    kf.step(float(t[-1]), mo.dG, mo.dV, mo.dM)  # (and a clone, which leaves phi and b alone)
     assert kf.kf.x[0, 0] == pytest.approx(ref.x[0, 0], abs=1e-15)
     assert kf.kf.x[1, 0] == pytest.approx(ref.x[1, 0], abs=1e-15)
     assert np.allclose(kf.kf.P[:2, :2], ref.P, rtol=1e-5, atol=1e-18)
@@ -64,7 +64,7 @@ def test_lean_update_equals_filterpy_update(seed: int) -> None:
     f = GyroPitchKalmanFilter()
     n = f.kf.dim_x
     for j in range(2, n):
-        f._bk_init(0.0)
+        f.start(0.0)
         scale = np.diag(10.0 ** rng.uniform(-5.0, -2.0, n))  # rad, rad/s: mixed magnitudes
         a = rng.standard_normal((n, n))
         P = scale @ (a @ a.T + 0.1 * np.eye(n)) @ scale
@@ -90,34 +90,61 @@ def test_lean_update_equals_filterpy_update(seed: int) -> None:
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_step_equals_advance_then_frame(seed: int) -> None:
-    """The per-frame `_bk_step` (prediction and clone written in one pass) leaves exactly the
-    state that `_bk_advance` and then `_bk_frame` leave: with and without gyro (ΔM = 0), with
-    the key frame's clone pinned or not, into every slot."""
+def test_frame_sequence_equals_filterpy(seed: int) -> None:
+    """The filter's own per-frame calls (`step`: prediction and clone in one pass; `update`:
+    gate and Joseph-form update) against filterpy's ``KalmanFilter.predict`` and ``update``
+    on the same random sequence of 300 frames: with and without gyro (ΔM = 0), key frames
+    pinned and renewed, a measurement on most frames against a random clone. After every
+    call x and P agree to 1e-12 relative (filterpy: ``predict`` with F and Q premultiplied
+    by the clone's copy matrix C, ``update`` with ``h = e0 - e_j``)."""
     rng = np.random.default_rng(seed)
-    for dM in (0.0, 0.03):
-        for pinned in (math.nan, 0.1, 0.4):
-            a, b = GyroPitchKalmanFilter(), GyroPitchKalmanFilter()
-            n = a.kf.dim_x
-            m = rng.standard_normal((n, n)) * 1e-3
-            P = m @ m.T
-            x = rng.standard_normal((n, 1)) * 1e-2
-            slots = [float(t) for t in rng.permutation([0.1, 0.2, 0.3, 0.4])]
-            for f in (a, b):
-                f._bk_init(0.0)
-                f.kf.P[:] = P
-                f.kf.x[:] = x
-                f._slots = list(slots)
-                f._pinned = pinned
-                f._t = 0.4
-            dG, dV = float(rng.normal(0.0, 1e-3)), float(rng.uniform(1e-10, 1e-8))
-            a._bk_advance(0.45, dG, dV, dM)
-            a._t = 0.45
-            a._bk_frame(0.45)
-            b._bk_step(0.45, dG, dV, dM)
-            assert b._slots == a._slots
-            assert np.array_equal(b.kf.P, a.kf.P)
-            assert np.array_equal(b.kf.x, a.kf.x)
+    f = GyroPitchKalmanFilter(KalmanConfig(gate_sigma=1e6))  # nothing gated: same sequence
+    n = f.kf.dim_x
+    t = 0.0
+    f.start(t)
+    ref = KalmanFilter(dim_x=n, dim_z=1)
+    ref.x, ref.P = f.kf.x.copy(), f.kf.P.copy()
+    qb = f.config.gyro.bias_random_walk**2
+
+    def close() -> None:
+        assert np.abs(f.kf.x - ref.x).max() <= 1e-12 * np.abs(ref.x).max()
+        assert np.abs(f.kf.P - ref.P).max() <= 1e-12 * np.abs(ref.P).max()
+
+    key = t
+    for _ in range(300):
+        dt = float(rng.uniform(0.02, 0.05))
+        dM = 0.0 if rng.random() < 0.1 else dt
+        dG = float(rng.normal(0.0, 2e-3)) if dM else 0.0
+        dV = float(rng.uniform(1e-11, 1e-8))
+        t += dt
+        f.step(t, dG, dV, dM)
+        j = 2 + f._slots.index(t)
+        C = np.eye(n)
+        C[j] = 0.0
+        C[j, 0] = 1.0  # x_j <- x_0
+        F = np.eye(n)
+        F[0, 1] = -dM
+        Q = np.zeros((n, n))
+        Q[0, 0] = dV + qb * dM**3 / 3.0
+        Q[0, 1] = Q[1, 0] = -qb * dM**2 / 2.0
+        Q[1, 1] = qb * dt
+        B = np.zeros((n, 1))
+        B[0, 0] = 1.0
+        ref.predict(u=np.array([[dG]]), B=C @ B, F=C @ F, Q=C @ Q @ C.T)
+        close()
+        if key not in f._slots or rng.random() < 0.05:
+            key = t  # a new key frame
+            continue
+        f.pin_key(key)
+        jk = 2 + f._slots.index(key)
+        dphi = float(f.kf.x[0, 0] - f.kf.x[jk, 0] + rng.normal(0.0, 1e-4))
+        R = float(10.0 ** rng.uniform(-10.0, -7.0))
+        assert f.update(VisualPitch(key, t, dphi, math.sqrt(R)), R)
+        h = np.zeros((1, n))
+        h[0, 0], h[0, jk] = 1.0, -1.0
+        ref.update(np.array([[dphi]]), R=np.array([[R]]), H=h)
+        close()
+    assert np.array_equal(f.kf.P, f.kf.P.T)
 
 
 def test_clone_slot_is_the_oldest_but_the_pinned_key() -> None:
@@ -126,12 +153,12 @@ def test_clone_slot_is_the_oldest_but_the_pinned_key() -> None:
     initial -inf, changing pins and slots put back from a snapshot."""
     rng = np.random.default_rng(5)
     f = GyroPitchKalmanFilter()
-    f._bk_init(0.0)
+    f.start(0.0)
     ref = list(f._slots)
     t = 0.0
     for step in range(2000):
         t += float(rng.uniform(0.01, 0.05))
-        if step % 3 == 0:  # pin a frame's clone (as `_bk_note`: a frame time), or nothing
+        if step % 3 == 0:  # pin a frame's clone (as `pin_key`: a frame time), or nothing
             frames = [x for x in ref if x > -math.inf]
             f._pinned = float(rng.choice(frames)) if frames and rng.random() < 0.8 else math.nan
         if step % 97 == 0:  # a snapshot put back: a new list
@@ -150,15 +177,13 @@ def test_arrays_assigned_to_the_filterpy_filter_are_taken_up() -> None:
     (filterpy style) is noticed at the next step, with the same result as writing in place."""
     a, b = GyroPitchKalmanFilter(), GyroPitchKalmanFilter()
     for f in (a, b):
-        f._bk_init(0.0)
-        f._t = 0.0
+        f.start(0.0)
     a.kf.x[0, 0] = 0.01
     b.kf.x = np.array(b.kf.x)
     b.kf.x[0, 0] = 0.01
     b.kf.P = b.kf.P.copy()
     for f in (a, b):
-        f._bk_advance(0.1, 0.001, 1e-9, 0.1)
-        f._bk_frame(0.1)
+        f.step(0.1, 0.001, 1e-9, 0.1)
         f._update(2, 1e-4, 1e-10)
     assert np.array_equal(a.kf.P, b.kf.P)
     assert np.array_equal(a.kf.x, b.kf.x)
@@ -241,7 +266,7 @@ def test_an_outlier_is_gated(kit) -> None:  # type: ignore[no-untyped-def]
 
 def _one_update(inlier_ratio: float) -> float:
     """Correction of the pitch by one visual measurement 0.05 deg away from the prediction."""
-    f = GyroPitchKalmanFilter(KalmanConfig(alignment=AlignmentConfig(enabled=False)))
+    f = kalman_fusion(KalmanConfig(alignment=AlignmentConfig(enabled=False)))
     f.estimate(0.0)
     for k in range(1, 11):
         f.push_gyro(k * 0.01, 0.0)

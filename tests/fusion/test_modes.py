@@ -10,7 +10,7 @@ import pytest
 
 from roadpreview.fusion import VisualPitch, make_fusion
 from roadpreview.fusion.config import ModeConfig
-from roadpreview.fusion.modes import ModeSupervisor, VisionTrust
+from roadpreview.fusion.mode_machine import ModeSupervisor, VisionTrust
 from roadpreview.types import FusionMode
 
 DEG = math.pi / 180.0

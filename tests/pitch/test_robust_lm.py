@@ -11,9 +11,9 @@ from roadpreview.camera import CameraModel
 from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.pitch import make_estimator
 from roadpreview.pitch.essential import EssentialMatrixPitchEstimator
-from roadpreview.pitch.none import NoCompensation
 from roadpreview.pitch.robust_lm import RobustPitchConfig, RobustPitchEstimator
 from roadpreview.pitch.synthetic import TwoViewScene, make_two_view_scene
+from roadpreview.pitch.zero import ZeroPitchEstimator
 
 CAM = CameraModel.from_fov(1920, 1080, 54.0)
 
@@ -138,7 +138,7 @@ def test_essential_matrix_baseline_within_its_looser_tolerance() -> None:
 
 def test_no_compensation_reports_zero() -> None:
     sc = _scenes(100, 1, seed=1)[0]
-    r = NoCompensation(CAM).estimate(sc.x_ref, sc.x_cur)
+    r = ZeroPitchEstimator(CAM).estimate(sc.x_ref, sc.x_cur)
     assert r
     assert r.phi == 0.0
 
@@ -178,7 +178,11 @@ def test_non_finite_rows_are_dropped_and_counted() -> None:
 def test_wrong_shapes_raise_value_error_naming_the_array(
     a: np.ndarray, b: np.ndarray, name: str
 ) -> None:
-    for est in (RobustPitchEstimator(CAM), EssentialMatrixPitchEstimator(CAM), NoCompensation(CAM)):
+    for est in (
+        RobustPitchEstimator(CAM),
+        EssentialMatrixPitchEstimator(CAM),
+        ZeroPitchEstimator(CAM),
+    ):
         with pytest.raises(InputDataError, match=name):
             est.estimate(a, b)
     assert issubclass(InputDataError, ValueError)
@@ -211,7 +215,7 @@ def test_registry_builds_by_name_and_rejects_unknown_names_and_options() -> None
     assert isinstance(
         make_estimator("essential", CAM, method="usac"), EssentialMatrixPitchEstimator
     )
-    assert isinstance(make_estimator("none", CAM), NoCompensation)
+    assert isinstance(make_estimator("none", CAM), ZeroPitchEstimator)
     with pytest.raises(ConfigError, match="'ransac5'"):
         make_estimator("ransac5", CAM)
     with pytest.raises(ConfigError, match="cauchy_scale"):

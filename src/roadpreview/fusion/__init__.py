@@ -11,28 +11,28 @@ Back ends are chosen by name from `BACKENDS` (imported lazily)::
 
 from __future__ import annotations
 
-from typing import Any
-
-from roadpreview.fusion.base import FusedPitch, PitchFusion, VisualPitch
+from roadpreview.fusion.base import (
+    FusedPitch,
+    PitchBackEnd,
+    PitchFusion,
+    RewindableBackEnd,
+    VisualPitch,
+)
 from roadpreview.fusion.compensation import compensation
 from roadpreview.registry import build
 from roadpreview.types import FusionMode
 
-#: config name -> (module, class, config class)
+#: config name -> (module, class or factory taking the config, config class)
 BACKENDS: dict[str, tuple[str, str, str | None]] = {
-    "kalman": ("roadpreview.fusion.kalman", "GyroPitchKalmanFilter", "KalmanConfig"),
-    "factor-graph": (
-        "roadpreview.fusion.factor_graph",
-        "GyroPitchFixedLagSmoother",
-        "FactorGraphConfig",
-    ),
+    "kalman": ("roadpreview.fusion.kalman", "kalman_fusion", "KalmanConfig"),
+    "factor-graph": ("roadpreview.fusion.factor_graph", "factor_graph_fusion", "FactorGraphConfig"),
     "visual-only": ("roadpreview.fusion.baselines", "VisualOnlyPitch", "VisualOnlyConfig"),
     "imu-only": ("roadpreview.fusion.baselines", "ImuOnlyPitch", "ImuOnlyConfig"),
-    "none": ("roadpreview.fusion.baselines", "NoCompensation", None),
+    "none": ("roadpreview.fusion.baselines", "ZeroPitchFusion", None),
 }
 
 
-def make_fusion(name: str, **options: Any) -> PitchFusion:
+def make_fusion(name: str, **options: object) -> PitchFusion:
     """Build the back end registered as ``name``; ``options`` fill its config dataclass
     (nested tables as dicts: ``gyro={"noise_density": ...}``)."""
     fusion: PitchFusion = build(
@@ -50,7 +50,9 @@ __all__ = [
     "BACKENDS",
     "FusedPitch",
     "FusionMode",
+    "PitchBackEnd",
     "PitchFusion",
+    "RewindableBackEnd",
     "VisualPitch",
     "compensation",
     "make_fusion",

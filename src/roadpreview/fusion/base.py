@@ -1,4 +1,5 @@
-"""The pitch-fusion interface: what goes in (gyro, visual pitch), what comes out (`FusedPitch`).
+"""The pitch-fusion interfaces: what goes in (gyro, visual pitch), what comes out (`FusedPitch`),
+and the estimator a fusion holds (`PitchBackEnd`).
 
 Every back end is a streaming estimator with the same five calls::
 
@@ -13,6 +14,12 @@ offset from the camera's (the fusion estimates the offset); visual times are
 frame times on the camera clock. Angles are radians, pitch positive nose up
 (``docs/method.md``). The fused pitch is relative to the camera's attitude at
 the first frame (``docs/fusion.md``).
+
+The `kalman` and `factor-graph` back ends are one `StreamingPitchFusion`
+(`roadpreview.fusion.streaming`: gyro buffering, time offset, modes, output)
+holding a `PitchBackEnd`, the estimator proper (filterpy's Kalman filter,
+gtsam's fixed-lag smoother), as a Stone Soup tracker holds its predictor and
+updater.
 """
 
 from __future__ import annotations
@@ -20,13 +27,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
+from roadpreview.fusion.gyro import RejectCounter
 from roadpreview.pitch.base import PitchEstimate
 from roadpreview.types import FusionMode
 
 
-def _slot_setters(cls: type) -> tuple[Callable[[Any, Any], None], ...]:
+def _slot_setters(cls: type) -> tuple[Callable[[object, object], None], ...]:
     """The slot setters of a dataclass's fields, in field order.
 
     `VisualPitch` and `FusedPitch` are made once per frame. The ``__init__`` that
@@ -183,4 +191,81 @@ class PitchFusion(Protocol):
 
     def reset(self) -> None:
         """Forget everything (a new drive)."""
+        ...
+
+
+#: (phi, its variance, gyro bias, its variance) of a back end's current state
+BackEndEstimate = tuple[float, float, float, float]
+
+
+class PitchBackEnd(Protocol):
+    """The estimator inside `StreamingPitchFusion`: pitch and gyro bias at frame times.
+
+    The fusion calls it in time order, frame by frame: `start` at the first frame, then per
+    frame `step` (the gyro's motion since the previous frame), `pin_key` and `update` for
+    each visual measurement of that frame that the mode machine lets through, and
+    `end_frame`. Everything else (buffering, ordering, time offset, modes, re-validation,
+    the output's easing) is the fusion's. Angles in rad, rates in rad/s, times in s on the
+    camera clock.
+    """
+
+    #: registry name ("kalman", "factor-graph")
+    name: str
+    #: where the back end counts and logs what it skips or rejects (shared with the fusion)
+    events: RejectCounter
+    #: consecutive rejected measurements (`update` False) that make vision lost
+    max_rejections: int
+    #: test every fused measurement against the gyro (a back end without its own gate);
+    #: re-validation after a loss always does
+    gate_with_gyro: bool
+
+    def start(self, t0: float) -> None:
+        """Forget everything and start at the first frame ``t0``: phi = 0 there, the bias
+        prior of the config."""
+        ...
+
+    def step(self, t: float, dG: float, dV: float, dM: float) -> None:
+        """Move to the next frame ``t`` with the gyro over the interval (`Motion`: integral
+        ``dG``, its variance ``dV``, measured time ``dM``) and keep that frame's state for
+        later relative measurements."""
+        ...
+
+    def pin_key(self, t_ref: float) -> None:
+        """A usable measurement refers to key frame ``t_ref``: keep that frame's state."""
+        ...
+
+    def update(self, meas: VisualPitch, var: float) -> bool:
+        """Fuse ``meas`` (of the current frame) with variance ``var``; False if rejected
+        as an outlier."""
+        ...
+
+    def end_frame(self, t: float) -> None:
+        """Every measurement of frame ``t`` has been given (a smoother solves here)."""
+        ...
+
+    def estimate(self) -> BackEndEstimate:
+        """(phi, variance, bias, variance) of the current (last stepped) frame."""
+        ...
+
+    def frame_estimate(self, t: float) -> tuple[float, float] | None:
+        """(phi, variance) of the earlier frame ``t`` if the back end still holds it."""
+        ...
+
+    def take_level_shift(self) -> float:
+        """How far the estimate of the pinned key frame has moved since the last call (the
+        part of the corrections that changes the absolute level, eased into the output)."""
+        ...
+
+
+@runtime_checkable
+class RewindableBackEnd(PitchBackEnd, Protocol):
+    """A back end that can copy and put back its state: frames beyond the gyro are then
+    processed exactly (and again later for good) instead of extrapolated."""
+
+    def snapshot(self) -> object:
+        """A copy of the state (opaque to the caller)."""
+        ...
+
+    def restore(self, snapshot: object) -> None:
+        """Put back a `snapshot` of this back end."""
         ...

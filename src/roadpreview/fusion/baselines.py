@@ -192,7 +192,7 @@ class ImuOnlyPitch:
         )
 
 
-class NoCompensation:
+class ZeroPitchFusion:
     """The paper's other baseline: pitch 0 (y_c = y), std infinite, mode DEGRADED."""
 
     name = "none"

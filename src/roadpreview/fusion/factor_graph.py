@@ -1,5 +1,8 @@
 """`factor-graph`: a gtsam fixed-lag smoother over pitch and gyro bias at frame times.
 
+`GyroPitchFixedLagSmoother` is the `PitchBackEnd`; `factor_graph_fusion` puts it into
+the `StreamingPitchFusion` that the registry name ``factor-graph`` builds.
+
 Variables (1-vectors; gtsam's scalar ``double`` values are slow to insert from
 Python): ``x_k`` the pitch at frame k (relative to the first frame) and
 ``b_j`` the gyro pitch-rate bias, a new one every ``bias_node_every_s``.
@@ -28,25 +31,33 @@ rebuild), and `BatchFixedLagSmoother` (LM over the window) is available as
 
 The output at a frame is the filtered estimate of its state (the newest in the
 window). Frames beyond the commit horizon (gyro not yet arrived) are
-extrapolated from the newest committed state (`StreamingFusion._tentative`).
+extrapolated from the newest committed state (`StreamingPitchFusion._tentative`).
 """
 
 from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import SupportsFloat, SupportsIndex, SupportsInt, cast
 
 import gtsam
 import numpy as np
+from numpy.typing import NDArray
 
-from roadpreview.fusion.base import VisualPitch
+from roadpreview.fusion.base import BackEndEstimate, VisualPitch
 from roadpreview.fusion.config import FactorGraphConfig
-from roadpreview.fusion.core import StreamingFusion
-from roadpreview.fusion.gyro import Motion
+from roadpreview.fusion.gyro import Motion, RejectCounter
+from roadpreview.fusion.streaming import StreamingPitchFusion
 
 _MIN_SIGMA = 1e-9  # rad: floor of every noise sigma (an interval of zero length)
+
+Array = NDArray[np.float64]
+#: the error function of a `gtsam.CustomFactor` (gtsam's stubs give its signature)
+_ErrorFunction = Callable[[gtsam.CustomFactor, gtsam.Values, gtsam.JacobianVector | None], Array]
+_Smoother = gtsam.IncrementalFixedLagSmoother | gtsam.BatchFixedLagSmoother
+#: key -> stamp as the smoothers' `update` is typed (its Mapping's key type is invariant)
+_Stamps = Mapping[SupportsInt | SupportsIndex, SupportsFloat | SupportsIndex]
 
 
 def X(k: int) -> int:
@@ -61,13 +72,13 @@ _MINUS_ONE = np.array([[-1.0]])
 _ONE = np.array([[1.0]])
 
 
-def _gyro_error(k0: int, k1: int, kb: int, d_g: float, d_m: float) -> Callable[..., Any]:
+def _gyro_error(k0: int, k1: int, kb: int, d_g: float, d_m: float) -> _ErrorFunction:
     """Error of the gyro between-factor: x_k - x_{k-1} - (ΔG - ΔM b); its Jacobians are
     constant (the model is linear)."""
     h_b = np.array([[d_m]])
 
-    def error(this: gtsam.CustomFactor, v: gtsam.Values, H: list[Any] | None) -> Any:
-        e = v.atVector(k1) - v.atVector(k0) - d_g + d_m * v.atVector(kb)
+    def error(this: gtsam.CustomFactor, v: gtsam.Values, H: gtsam.JacobianVector | None) -> Array:
+        e: Array = v.atVector(k1) - v.atVector(k0) - d_g + d_m * v.atVector(kb)
         if H is not None:
             H[0] = _MINUS_ONE
             H[1] = _ONE
@@ -77,12 +88,12 @@ def _gyro_error(k0: int, k1: int, kb: int, d_g: float, d_m: float) -> Callable[.
     return error
 
 
-def _joint_prior_error(keys: list[int], mean: np.ndarray) -> Callable[..., Any]:
+def _joint_prior_error(keys: list[int], mean: Array) -> _ErrorFunction:
     """Error of a joint Gaussian prior on several 1-vector variables (bounded rebuild)."""
     n = mean.size
     jac = [np.eye(n)[:, i : i + 1] for i in range(n)]
 
-    def error(this: gtsam.CustomFactor, v: gtsam.Values, H: list[Any] | None) -> Any:
+    def error(this: gtsam.CustomFactor, v: gtsam.Values, H: gtsam.JacobianVector | None) -> Array:
         x = np.array([v.atVector(k)[0] for k in keys])
         if H is not None:
             for i in range(n):
@@ -92,38 +103,49 @@ def _joint_prior_error(keys: list[int], mean: np.ndarray) -> Callable[..., Any]:
     return error
 
 
-class GyroPitchFixedLagSmoother(StreamingFusion):
-    """Pitch and gyro bias by a gtsam fixed-lag smoother over frame-time states."""
+def factor_graph_fusion(config: FactorGraphConfig | None = None) -> StreamingPitchFusion:
+    """The ``factor-graph`` fusion: `GyroPitchFixedLagSmoother` in a `StreamingPitchFusion`."""
+    config = config or FactorGraphConfig()
+    return StreamingPitchFusion(GyroPitchFixedLagSmoother(config), config)
+
+
+class GyroPitchFixedLagSmoother:
+    """Pitch and gyro bias by a gtsam fixed-lag smoother over frame-time states; a
+    `PitchBackEnd` (it cannot copy its state: frames beyond the gyro are extrapolated)."""
 
     name = "factor-graph"
-    can_rewind = False
+    #: the robust loss bounds an outlier's pull but rejects nothing: the fusion tests every
+    #: measurement against the gyro
     gate_with_gyro = True
+    max_rejections = 5
 
     def __init__(self, config: FactorGraphConfig | None = None) -> None:
-        self.fcfg = config or FactorGraphConfig()
-        super().__init__(self.fcfg)
+        self.config = config or FactorGraphConfig()
+        self.events = RejectCounter(f"fusion[{self.name}]")
+        self._q_bias = self.config.gyro.bias_random_walk**2
+        self._reset()
 
     # -- smoother ---------------------------------------------------------------------------
-    def _new_smoother(self) -> Any:
-        if self.fcfg.smoother == "batch":
-            return gtsam.BatchFixedLagSmoother(self.fcfg.lag_s)
+    def _new_smoother(self) -> _Smoother:
+        if self.config.smoother == "batch":
+            return gtsam.BatchFixedLagSmoother(self.config.lag_s)
         params = gtsam.ISAM2Params()
         # relinearise whatever moves by more than a small fraction of a visual sigma, so that
         # the robust weights are re-evaluated at the solution (iteratively reweighted)
-        params.setRelinearizeThreshold(self.fcfg.relinearize_threshold_rad)
-        params.relinearizeSkip = self.fcfg.relinearize_skip
+        params.setRelinearizeThreshold(self.config.relinearize_threshold_rad)
+        params.relinearizeSkip = self.config.relinearize_skip
         params.findUnusedFactorSlots = True  # reuse the slots of removed factors (no growth)
-        return gtsam.IncrementalFixedLagSmoother(self.fcfg.lag_s, params)
+        return gtsam.IncrementalFixedLagSmoother(self.config.lag_s, params)
 
-    def _noise(self, sigma: float) -> Any:
+    def _noise(self, sigma: float) -> gtsam.noiseModel.Isotropic:
         return gtsam.noiseModel.Isotropic.Sigma(1, max(sigma, _MIN_SIGMA))
 
-    def _robust(self, sigma: float) -> Any:
+    def _robust(self, sigma: float) -> gtsam.noiseModel.Base:
         base = self._noise(sigma)
-        loss = self.fcfg.robust_loss
+        loss = self.config.robust_loss
         if loss == "none":
             return base
-        k = self.fcfg.robust_k
+        k = self.config.robust_k
         m = (
             gtsam.noiseModel.mEstimator.Huber.Create(k)
             if loss == "huber"
@@ -131,9 +153,9 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
         )
         return gtsam.noiseModel.Robust.Create(m, base)
 
-    # -- hooks ------------------------------------------------------------------------------
-    def _bk_reset(self) -> None:
-        self.smoother: Any = None
+    # -- PitchBackEnd -----------------------------------------------------------------------
+    def _reset(self) -> None:
+        self.smoother: _Smoother = self._new_smoother()
         self._k = -1  # newest pitch state
         self._j = 0  # current bias state
         self._bias_t = -math.inf  # when it was added
@@ -141,7 +163,6 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
         self._graph = gtsam.NonlinearFactorGraph()
         self._values = gtsam.Values()
         self._stamps: dict[int, float] = {}
-        self._pending = Motion(0.0, 0.0, 0.0)
         self._unit = gtsam.noiseModel.Unit.Create(1)
         self._phi = 0.0
         self._var = 0.0
@@ -159,10 +180,10 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
         self._last_rebuild = -math.inf
         self.n_updates = 0
 
-    def _bk_init(self, t0: float) -> None:
-        self._bk_reset()
+    def start(self, t0: float) -> None:
+        """phi = 0 at the first frame ``t0`` (a tight prior), the configured bias prior."""
+        self._reset()  # (a new smoother)
         g = self.config.gyro
-        self.smoother = self._new_smoother()
         self._last_rebuild = t0
         self._k = 0
         self._key_of[t0] = 0
@@ -179,19 +200,15 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
         self._b = g.initial_bias_rad_s
         self._bvar = g.bias_prior_std_rad_s**2
 
-    def _bk_propagate(self, t: float, motion: Motion) -> None:
-        m = self._pending
-        self._pending = Motion(m.dG + motion.dG, m.dV + motion.dV, m.dM + motion.dM)
-
-    def _bk_frame(self, t: float) -> None:
-        if t in self._key_of:  # the first frame
-            return
+    def step(self, t: float, dG: float, dV: float, dM: float) -> None:
+        """A new pitch state at frame ``t``, tied to the previous one by the gyro factor (and
+        a new bias state every `FactorGraphConfig.bias_node_every_s`); solved at
+        `end_frame`."""
         k0 = self._k
         k = k0 + 1
         self._k = k
         self._key_of[t] = k
-        mo = self._pending
-        self._pending = Motion(0.0, 0.0, 0.0)
+        mo = Motion(dG, dV, dM)
         x0, x1, b0 = X(k0), X(k), B(self._j)
         pred = self._phi + mo.dG - self._b * mo.dM
         self._values.insert(x1, np.array([pred]))
@@ -199,7 +216,7 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
         self._stamps[x1] = t
         self._frame_of[x1] = t
         self._stamps[b0] = t  # in use: keep it in the window
-        if t - self._bias_t >= self.fcfg.bias_node_every_s - 1e-9:
+        if t - self._bias_t >= self.config.bias_node_every_s - 1e-9:
             self._j += 1
             b1 = B(self._j)
             self._values.insert(b1, np.array([self._b]))
@@ -209,12 +226,14 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
             self._bias_t = t
         self._phi = pred  # until the smoother says otherwise
 
-    def _gyro_factor(self, x0: int, x1: int, b0: int, mo: Motion, pred: float) -> Any:
+    def _gyro_factor(
+        self, x0: int, x1: int, b0: int, mo: Motion, pred: float
+    ) -> gtsam.NonlinearFactor:
         """x1 - x0 - (ΔG - ΔM b0), sigma sqrt(ΔV): a `gtsam.CustomFactor`, or (default) the
         same linear factor held in C++ (`LinearContainerFactor` of a `JacobianFactor` at the
         current estimate), which the smoother evaluates without calling back into Python."""
         sigma = max(math.sqrt(mo.dV), _MIN_SIGMA)
-        if self.fcfg.gyro_factor == "custom":
+        if self.config.gyro_factor == "custom":
             return gtsam.CustomFactor(
                 self._noise(sigma), [x0, x1, b0], _gyro_error(x0, x1, b0, mo.dG, mo.dM)
             )
@@ -235,11 +254,13 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
         )
         return gtsam.LinearContainerFactor(jf, lin)
 
-    def _bk_note(self, meas: VisualPitch) -> None:
-        if meas.t_ref in self._key_of:
-            self._pinned = meas.t_ref
+    def pin_key(self, t_ref: float) -> None:
+        if t_ref in self._key_of:
+            self._pinned = t_ref
 
-    def _bk_visual(self, meas: VisualPitch, var: float) -> bool:
+    def update(self, meas: VisualPitch, var: float) -> bool:
+        """A robust between-factor from the key frame's state to the current one (never
+        rejected here: ``gate_with_gyro``)."""
         k = self._key_of[meas.t]
         z, R = meas.dphi, var
         kref = self._key_of.get(meas.t_ref)
@@ -267,7 +288,8 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
         self._stamps[X(kref)] = meas.t  # keep the key frame in the window
         return True
 
-    def _bk_frame_done(self, t: float) -> None:
+    def end_frame(self, t: float) -> None:
+        """Give the frame's new factors to the smoother and read the new estimate."""
         if self._graph.size() == 0:
             return
         kp = self._key_of.get(self._pinned)
@@ -276,7 +298,7 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
             if kp is not None and X(kp) in self._times
             else None
         )
-        self.smoother.update(self._graph, self._values, self._stamps)
+        self.smoother.update(self._graph, self._values, cast(_Stamps, self._stamps))
         self.n_updates += 1
         self._restamp(self._stamps)
         self._frame_cache.clear()
@@ -291,7 +313,8 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
         self._var, self._bvar = self._marginal_variances(k)
         if before is not None and kp is not None and kp in self._key_of.values():
             self._shift += float(est(X(kp))[0]) - before  # how far the key frame moved
-        if self.fcfg.rebuild_every_s > 0 and t - self._last_rebuild >= self.fcfg.rebuild_every_s:
+        every = self.config.rebuild_every_s
+        if every > 0 and t - self._last_rebuild >= every:
             self._rebuild(t)
 
     def _restamp(self, stamps: dict[int, float]) -> None:
@@ -306,7 +329,7 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
         """Drop what the smoother has marginalised: keys stamped more than ``lag_s`` before
         the newest stamp (the fixed-lag smoothers' rule)."""
         times = self._times
-        cutoff = self._newest_stamp - self.fcfg.lag_s
+        cutoff = self._newest_stamp - self.config.lag_s
         while times:
             key, ts = next(iter(times.items()))
             if ts >= cutoff:
@@ -360,17 +383,17 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
             )
         )
         stamps = dict.fromkeys(keys, t)
-        self.smoother.update(graph, values, stamps)
+        self.smoother.update(graph, values, cast(_Stamps, stamps))
         self._times = OrderedDict()
         self._restamp(stamps)
         self._key_of = {tf: kk for tf, kk in self._key_of.items() if X(kk) in keys}
         self._frame_of = {X(kk): tf for tf, kk in self._key_of.items()}
         self._last_rebuild = t
 
-    def _bk_output(self) -> tuple[float, float]:
-        return self._phi, self._var
+    def estimate(self) -> BackEndEstimate:
+        return self._phi, self._var, self._b, self._bvar
 
-    def _bk_frame_estimate(self, t: float) -> tuple[float, float] | None:
+    def frame_estimate(self, t: float) -> tuple[float, float] | None:
         k = self._key_of.get(t)
         if k is None or X(k) not in self._times:
             return None
@@ -388,9 +411,6 @@ class GyroPitchFixedLagSmoother(StreamingFusion):
         marg = gtsam.Marginals(self.smoother.getFactors(), self.smoother.calculateEstimate())
         return float(marg.marginalCovariance(X(k))[0, 0])
 
-    def _bk_bias(self) -> tuple[float, float]:
-        return self._b, self._bvar
-
-    def _bk_take_level_shift(self) -> float:
+    def take_level_shift(self) -> float:
         shift, self._shift = self._shift, 0.0
         return shift

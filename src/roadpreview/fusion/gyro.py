@@ -97,9 +97,6 @@ class GyroHistory:
         self._range = self.cfg.range_rad_s
         self._set_period(1.0 / self.cfg.rate_hz)  # also counts regular intervals
         self.floor = -math.inf  #: stamps at or before this are committed: late samples
-        # accepted samples: regular ones in completed periods of 64 (`push`), other ones
-        self._n_regular_done = 0
-        self._n_other = 0
         self._n_trimmed = 0  # knots dropped from the front so far (absolute knot numbers)
         # numpy copies of the stamps and integral (first absolute knot, s, G), for integral_at
         self._arrays: tuple[int, NDArray[np.float64], NDArray[np.float64]] | None = None
@@ -127,16 +124,9 @@ class GyroHistory:
                 n = self._n_regular = self._n_regular + 1
                 self._sum_regular += dt
                 if n == 64:
-                    self._n_regular_done += 64
                     self._set_period(self._sum_regular / 64.0)
                 return True
         return self._push_checked(t, rate)
-
-    @property
-    def n_accepted(self) -> int:
-        """Samples accepted so far (`push` counts them only by the regular-interval count
-        it keeps anyway: one attribute update less per sample)."""
-        return self._n_regular_done + self._n_regular + self._n_other
 
     def _set_period(self, period: float) -> None:
         """The sample period, re-estimated every 64 regular samples (their mean interval)."""
@@ -170,7 +160,6 @@ class GyroHistory:
         s = self._s
         if not s or t > s[-1] + _DUPLICATE_S:
             self._append(t, rate)
-            self._n_other += 1
             return True
         if abs(t - s[-1]) <= _DUPLICATE_S:
             self.rejects("duplicate", "duplicated stamp t=%.6f: rejected", t)
@@ -228,7 +217,6 @@ class GyroHistory:
         self._append(t, w)
         for tt, ww in later:
             self._append(tt, ww)
-        self._n_other += 1
         return True
 
     # -- queries ------------------------------------------------------------------------
@@ -293,18 +281,11 @@ class GyroHistory:
             v1, v2 = 0.0, (self.cfg.hold_rate_std_rad_s * d) ** 2
         return g2 - g1, max(v2 - v1, 0.0), m2 - m1
 
-    def rate_at(self, t: float) -> float:
-        """The measured rate of the sample covering stamp ``t`` (the newest beyond the end)."""
-        s = self._s
-        if not s:
-            return 0.0
-        i = bisect.bisect_left(s, t)
-        return self._k[i][3] if i < len(s) else self._k[-1][3]
-
     def rate_change(self, s1: float, s2: float) -> float:
-        """``rate_at(s2) - rate_at(s1)``. Per frame, s2 is the end of the interval `motion3`
-        returned last and s1 a key frame's stamp, the same from frame to frame: their rates
-        are kept rather than searched again."""
+        """The measured rate of the sample covering stamp ``s2`` minus that covering ``s1``
+        (the newest sample's beyond the end; 0 without samples). Per frame, s2 is the end of
+        the interval `motion3` returned last and s1 a key frame's stamp, the same from frame
+        to frame: their rates are kept rather than searched again."""
         s = self._s
         if not s:
             return 0.0

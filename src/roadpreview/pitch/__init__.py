@@ -10,8 +10,6 @@ Estimators are chosen by name from `ESTIMATORS` (imported lazily)::
 
 from __future__ import annotations
 
-from typing import Any
-
 from roadpreview.camera import CameraModel
 from roadpreview.pitch.base import PitchEstimate, PitchEstimator
 from roadpreview.registry import build
@@ -24,11 +22,11 @@ ESTIMATORS: dict[str, tuple[str, str, str | None]] = {
         "EssentialMatrixPitchEstimator",
         "EssentialPitchConfig",
     ),
-    "none": ("roadpreview.pitch.none", "NoCompensation", None),
+    "none": ("roadpreview.pitch.zero", "ZeroPitchEstimator", None),
 }
 
 
-def make_estimator(name: str, camera: CameraModel, **options: Any) -> PitchEstimator:
+def make_estimator(name: str, camera: CameraModel, **options: object) -> PitchEstimator:
     """Build the estimator registered as ``name``; ``options`` fill its config dataclass."""
     estimator: PitchEstimator = build(
         ESTIMATORS, name, camera, key="pitch.estimator", where="pitch", options=options

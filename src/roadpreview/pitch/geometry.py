@@ -216,12 +216,12 @@ class PitchOnlySampson:
         u = (np.concatenate([T @ M for M in mats], axis=0) @ ref_T).reshape(3, 3, -1)
         # lines in the reference image: E^T n_cur = (A + cB + sC)^T (T^T n_cur)
         v = (np.concatenate([M.T @ T.T for M in mats], axis=0) @ cur_T).reshape(3, 3, -1)
-        self.P = (u * cur_T[None]).sum(axis=1)  # (3, N): r = [1, c, s] @ P
+        self.P: Array = (u * cur_T[None]).sum(axis=1)  # (3, N): r = [1, c, s] @ P
         scale = np.array([1.0 / fx, 1.0 / fy])[None, :, None]
         ab = np.concatenate([u[:, :2] * scale, v[:, :2] * scale], axis=1)  # (3, 4, N)
         # the six distinct entries of the Gram matrix of the three line terms: (6, N)
         q = np.einsum("ikn,jkn->ijn", ab, ab)
-        self.Q = np.stack([q[0, 0], q[0, 1], q[0, 2], q[1, 1], q[1, 2], q[2, 2]])
+        self.Q: Array = np.stack([q[0, 0], q[0, 1], q[0, 2], q[1, 1], q[1, 2], q[2, 2]])
         # rows: value and derivative with respect to φ; filled in by _bases
         self._mp = np.zeros((2, 3))
         self._mq = np.zeros((2, 6))
@@ -248,4 +248,6 @@ class PitchOnlySampson:
     def distance(self, phi: float) -> Array:
         """Only g (for trial steps)."""
         mp, mq = self._bases(phi)
-        return (mp[0] @ self.P) / np.sqrt(mq[0] @ self.Q)
+        p0: Array = mp[0]  # (an integer index is untyped in numpy's stubs)
+        q0: Array = mq[0]
+        return (p0 @ self.P) / np.sqrt(q0 @ self.Q)

@@ -248,11 +248,6 @@ class RobustPitchEstimator:
         """Forget the warm start; the next fit starts from zero rotation."""
         self._theta_prev = np.zeros(self._k)
 
-    @property
-    def warm_start(self) -> Array:
-        """Parameters the next fit starts from."""
-        return self._theta_prev.copy()
-
     # -- pieces of the fit ----------------------------------------------------------
     def _cost(self, g: Array) -> float:
         if self.config.loss == "cauchy":

@@ -1,6 +1,9 @@
-"""The streaming machinery shared by the `kalman` and `factor-graph` back ends.
+"""`StreamingPitchFusion`: the gyro-visual pitch fusion around a `PitchBackEnd`.
 
-What every back end needs and nothing in it is specific to one of them:
+The `kalman` and `factor-graph` back ends are this class holding a Kalman filter or a
+fixed-lag smoother (`roadpreview.fusion.base.PitchBackEnd`: start, step, pin_key,
+update, end_frame, estimate). What every back end needs and nothing in it is specific to
+one of them is here:
 
 * the gyro buffer (`GyroHistory`: validation, ordering, gaps, running integral),
 * the camera-IMU time offset (`TimeOffsetEstimator`), applied to every gyro query,
@@ -16,15 +19,15 @@ gyro samples still on their way are not missed. When the IMU has timed out
 the horizon is the frame time and the gap is bridged without gyro. Frames
 beyond the horizon are processed tentatively for the output (the last gyro
 rate held, with growing variance) and processed again for good once the
-gyro has arrived. Back ends that can copy their state do this exactly
-(`kalman`); the others extrapolate from their last committed frame.
+gyro has arrived. Back ends that can copy their state (`RewindableBackEnd`) do
+this exactly (`kalman`); the others extrapolate from their last committed frame.
 
 Cost. Everything here runs once per frame or once per gyro sample, so the hot
 paths (`push_gyro`, `push_visual`, `estimate` with the frame it commits) are
 written for CPython: settings read once into attributes, the gyro's interval
 as a plain tuple (`GyroHistory.motion3`, which keeps the end of one frame's
 interval for the start of the next), one back-end call to move to a frame and
-keep it (`_bk_step`), a measurement's variance as far as it is known computed
+keep it (`PitchBackEnd.step`), a measurement's variance as far as it is known computed
 when it arrives, O(1) checks before any search. `roadpreview bench fusion`
 measures the whole streaming path.
 """
@@ -34,15 +37,13 @@ from __future__ import annotations
 import bisect
 import logging
 import math
-from abc import ABC, abstractmethod
 from dataclasses import replace
-from typing import Any
 
 from roadpreview.errors import InputDataError
-from roadpreview.fusion.base import FusedPitch, VisualPitch
+from roadpreview.fusion.base import FusedPitch, PitchBackEnd, RewindableBackEnd, VisualPitch
 from roadpreview.fusion.config import FusionConfig
-from roadpreview.fusion.gyro import GyroHistory, Motion, RejectCounter
-from roadpreview.fusion.modes import ModeSupervisor, VisionTrust
+from roadpreview.fusion.gyro import GyroHistory, Motion
+from roadpreview.fusion.mode_machine import ModeSupervisor, VisionTrust
 from roadpreview.fusion.timesync import TimeOffsetEstimator
 from roadpreview.types import FusionMode
 
@@ -57,25 +58,25 @@ _TRUSTED = VisionTrust.TRUSTED
 _Metas = list[tuple[VisualPitch, float | None]]
 
 
-class StreamingFusion(ABC):
-    """Base of the filter-like back ends: buffering, alignment, modes, output."""
-
-    name = "abstract"
-    #: the back end can snapshot and restore its state (exact tentative processing)
-    can_rewind = False
+class StreamingPitchFusion:
+    """Pitch from gyro and relative visual pitch, streamed: buffering, time offset, modes and
+    output around a `PitchBackEnd` (a `PitchFusion`)."""
 
     _last_query: float
     _last_out: FusedPitch | None
     _level: float
     _level_t: float
 
-    def __init__(self, config: FusionConfig) -> None:
+    def __init__(self, backend: PitchBackEnd, config: FusionConfig) -> None:
         config.validate("fusion")
         self.config = config
-        self.events = RejectCounter(f"fusion[{self.name}]")
+        self.backend = backend
+        #: the back end when it can copy its state (exact tentative frames), else None
+        self._rewind = backend if isinstance(backend, RewindableBackEnd) else None
+        self.name = backend.name
+        self.events = backend.events
         self.gyro = GyroHistory(config.gyro, self.events)
         self.aligner = TimeOffsetEstimator(config.alignment)
-        self._q_bias = config.gyro.bias_random_walk**2
         # settings used per frame, read once (the config is frozen)
         g, v, mo = config.gyro, config.vision, config.modes
         self._timeout = g.timeout_s
@@ -90,10 +91,9 @@ class StreamingFusion(ABC):
         self._capture = mo.level_capture_s
         self._ease = mo.level_ease_s
         self._track_add = self.aligner.track.add  # usable measurements -> the visual rate track
-        self._has_frame_done = type(self)._bk_frame_done is not StreamingFusion._bk_frame_done
-        self._gate_with_gyro = self.gate_with_gyro  # (a class attribute: a slower lookup)
+        self._gate_with_gyro = backend.gate_with_gyro
+        self._max_rejections = backend.max_rejections
         self._reset_core()
-        self._bk_reset()
 
     # -- public interface -------------------------------------------------------------------
     def reset(self) -> None:
@@ -102,7 +102,6 @@ class StreamingFusion(ABC):
         self.aligner.reset()
         self.events.counts.clear()
         self._reset_core()
-        self._bk_reset()
 
     def push_gyro(
         self,
@@ -213,7 +212,8 @@ class StreamingFusion(ABC):
         # new shift of the key frame's estimate (`_level_shift`, inline), so that the output
         # does not step with it
         sup = self._sup  # (after the commit, which may have started it again)
-        shift = self._bk_take_level_shift()
+        backend = self.backend
+        shift = backend.take_level_shift()
         if not self._t - sup.reacquired_t <= self._capture:
             shift = 0.0
         ease = self._ease
@@ -230,9 +230,9 @@ class StreamingFusion(ABC):
         if frames and frames[0] <= t:
             phi, var, mode, shift = self._tentative(t)
             phi -= shift
-            b, bvar = self._bk_bias()
+            _, _, b, bvar = backend.estimate()
         else:
-            phi, var, b, bvar = self._bk_output_bias()
+            phi, var, b, bvar = backend.estimate()
             mode = sup.mode
         # (`0.0 if x < 0.0 else x` is max(x, 0.0) without calling the builtin; NaN stays NaN)
         out = FusedPitch(  # t, phi, std, mode, bias, time_offset, its confidence, bias_std
@@ -249,89 +249,9 @@ class StreamingFusion(ABC):
         return out
 
     @property
-    def time_offset(self) -> float:
-        """The applied camera-IMU offset (IMU stamp minus camera time), s."""
-        return self._tau
-
-    @property
     def stats(self) -> dict[str, int]:
         """Counts of rejected, bridged, reordered and gated inputs by kind."""
         return dict(self.events.counts)
-
-    # -- back-end hooks ---------------------------------------------------------------------
-    @abstractmethod
-    def _bk_reset(self) -> None: ...
-
-    @abstractmethod
-    def _bk_init(self, t0: float) -> None:
-        """Start at the first frame: phi = 0 there, bias prior."""
-
-    @abstractmethod
-    def _bk_propagate(self, t: float, motion: Motion) -> None:
-        """Move the current state to time ``t`` with the gyro ``motion`` over the interval."""
-
-    def _bk_advance(self, t: float, dG: float, dV: float, dM: float) -> None:
-        """`_bk_propagate` with the motion's fields as arguments (the per-frame call; a back
-        end may override it to skip building the `Motion`)."""
-        self._bk_propagate(t, Motion(dG, dV, dM))
-
-    @abstractmethod
-    def _bk_frame(self, t: float) -> None:
-        """The current state has reached frame ``t`` (keep it for later relative measurements)."""
-
-    def _bk_step(self, t: float, dG: float, dV: float, dM: float) -> None:
-        """`_bk_advance` to frame ``t`` and `_bk_frame` there: the per-frame call (a back end
-        may override it to do both in one pass). The committed time is set to ``t`` in
-        between, as the caller sets it afterwards."""
-        self._bk_advance(t, dG, dV, dM)
-        self._t = t
-        self._bk_frame(t)
-
-    @abstractmethod
-    def _bk_visual(self, meas: VisualPitch, var: float) -> bool:
-        """Fuse a measurement whose frame is the current state; False if rejected as outlier."""
-
-    def _bk_note(self, meas: VisualPitch) -> None:  # noqa: B027 - optional hook
-        """A good-quality measurement of the current frame, fused or not (key bookkeeping)."""
-
-    def _bk_frame_done(self, t: float) -> None:  # noqa: B027 - optional hook
-        """Every measurement of frame ``t`` has been handled."""
-
-    @abstractmethod
-    def _bk_output(self) -> tuple[float, float]:
-        """(phi, variance) of the current (last committed) state."""
-
-    @abstractmethod
-    def _bk_bias(self) -> tuple[float, float]:
-        """(bias, variance) of the gyro pitch-rate bias."""
-
-    def _bk_output_bias(self) -> tuple[float, float, float, float]:
-        """`_bk_output` and `_bk_bias` in one call (phi, variance, bias, variance)."""
-        return self._bk_output() + self._bk_bias()
-
-    def _bk_take_level_shift(self) -> float:
-        """How far the estimate of the current key frame has moved since the last call (the
-        part of the corrections that changes the absolute level, not the relative pitch)."""
-        return 0.0
-
-    def _bk_frame_estimate(self, t: float) -> tuple[float, float] | None:
-        """(phi, variance) of the committed frame ``t`` if the back end still holds it (used
-        by the extrapolated output of back ends that cannot rewind)."""
-        return None
-
-    def _bk_snapshot(self) -> Any:
-        """A copy of the back end's state; only called when ``can_rewind`` is True."""
-        raise TypeError(f"{type(self).__name__} sets can_rewind but cannot copy its state")
-
-    def _bk_restore(self, snap: Any) -> None:
-        """Put back a `_bk_snapshot`; only called when ``can_rewind`` is True."""
-        raise TypeError(f"{type(self).__name__} sets can_rewind but cannot restore its state")
-
-    #: consecutive gated measurements that make vision lost
-    max_rejections = 5
-    #: test every fused measurement against the gyro over [t_ref, t] (back ends without a
-    #: gate of their own); re-validation after a loss always does
-    gate_with_gyro = False
 
     # -- internals --------------------------------------------------------------------------
     def _reset_core(self) -> None:
@@ -373,8 +293,7 @@ class StreamingFusion(ABC):
         self._started = True
         self._t0 = t0
         self._t = t0
-        self._bk_init(t0)
-        self._bk_frame(t0)
+        self.backend.start(t0)
         self._frames.pop(0)
         alive = self._alive(t0)
         self._handle_frame_inputs(t0, self._sup, True, alive)
@@ -479,12 +398,12 @@ class StreamingFusion(ABC):
         frames, self._startup = self._startup, None
         if not frames:
             return
-        phi_before = self._bk_output()[0]
-        self._bk_take_level_shift()
+        backend = self.backend
+        phi_before = backend.estimate()[0]
+        backend.take_level_shift()
         self._sup = ModeSupervisor(self.config.modes)
         self._t = self._t0
-        self._bk_init(self._t0)
-        self._bk_frame(self._t0)
+        backend.start(self._t0)
         for tf, vis, fail in frames:
             if vis is not None:
                 self._vis[tf] = vis
@@ -493,8 +412,8 @@ class StreamingFusion(ABC):
             self._process_frame(tf, self._sup, True)
             self._vis.pop(tf, None)
             self._fails.pop(tf, None)
-        self._bk_take_level_shift()
-        self._level -= self._bk_output()[0] - phi_before
+        backend.take_level_shift()
+        self._level -= backend.estimate()[0] - phi_before
         log.info(
             "fusion[%s]: camera-IMU offset known (%.4f s): %d startup frames processed again"
             " with the gyro",
@@ -525,14 +444,14 @@ class StreamingFusion(ABC):
             if alive:
                 tau = self._tau
                 dG, dV, dM = gyro.motion3(t1 + tau, tf + tau)
-                self._bk_step(tf, dG, dV, dM)
+                self.backend.step(tf, dG, dV, dM)
             else:
-                self._bk_step(tf, 0.0, (self._blind * (tf - t1)) ** 2, 0.0)
+                self.backend.step(tf, 0.0, (self._blind * (tf - t1)) ** 2, 0.0)
             self._t = tf
         fuse = self._handle_frame_inputs(tf, sup, apply, alive)
         sup.update_mode(alive)
-        if apply and self._has_frame_done:
-            self._bk_frame_done(tf)
+        if apply:
+            self.backend.end_frame(tf)
         return alive, fuse
 
     def _handle_frame_inputs(
@@ -548,7 +467,7 @@ class StreamingFusion(ABC):
             else:
                 sup.no_news(tf)
             return fuse
-        gyro = self.gyro
+        gyro, backend = self.gyro, self.backend
         use_gyro = imu_ok and gyro.newest is not None
         tau = self._tau
         for m, var in metas:
@@ -556,7 +475,7 @@ class StreamingFusion(ABC):
                 sup.bad_frame(tf)
                 continue
             if apply:
-                self._bk_note(m)
+                backend.pin_key(m.t_ref)
             # the measurement's variance (`push_visual`: the estimator's, inflated for few
             # inliers) plus the part of the gyro that a time-offset error would move:
             # (σ_τ Δω)²
@@ -576,17 +495,17 @@ class StreamingFusion(ABC):
                             "visual measurement at t=%.6f disagrees with the gyro: not fused",
                             m.t,
                         )
-                    sup.gated(True, self.max_rejections, tf)
+                    sup.gated(True, self._max_rejections, tf)
                     continue
                 if not sup.good_frame(tf, consistent):
                     continue
             if apply:
-                if self._bk_visual(m, var):
+                if backend.update(m, var):
                     # `gated(False, ...)`, inline (max_rejections >= 1)
                     sup.rejected = 0
                     sup.last_accepted_t = tf
                 else:
-                    sup.gated(True, self.max_rejections, tf)
+                    sup.gated(True, self._max_rejections, tf)
             else:
                 fuse.append((m, var))
         return fuse
@@ -607,7 +526,7 @@ class StreamingFusion(ABC):
         if not imu_ok or not self.gyro.covers(m.t_ref + self._tau):
             return True  # nothing to check against (no gyro, or the key is too old)
         mo = self.gyro.motion(m.t_ref + self._tau, m.t + self._tau)
-        b, bvar = self._bk_bias()
+        _, _, b, bvar = self.backend.estimate()
         pred = mo.dG - b * mo.dM
         tot = var + mo.dV + mo.dM * mo.dM * bvar
         return abs(m.dphi - pred) <= self.config.modes.consistency_sigma * math.sqrt(tot)
@@ -616,22 +535,23 @@ class StreamingFusion(ABC):
         """Output for frames beyond the commit horizon, without committing them:
         (phi, variance, mode, level shift of the key frame meanwhile)."""
         frames = [f for f in self._frames if f <= t]
-        if self.can_rewind:
-            snap = (self._bk_snapshot(), self._t, replace(self._sup))
+        rewind = self._rewind
+        if rewind is not None:
+            snap = (rewind.snapshot(), self._t, replace(self._sup))
             try:
                 for tf in frames:
                     self._process_frame(tf, self._sup, True)
-                phi, var = self._bk_output()
+                phi, var, _, _ = rewind.estimate()
                 return phi, var, self._sup.mode, self._level_shift(self._sup)
             finally:
                 bk, self._t, self._sup = snap
-                self._bk_restore(bk)
+                rewind.restore(bk)
         # back ends that cannot copy their state: the gyro from the newest committed state,
         # each accepted visual measurement fused by its variance against the key frame's
         # estimate (committed or extrapolated here), their correlation neglected
         sup = replace(self._sup)
-        phi, var = self._bk_output()
-        b, bvar = self._bk_bias()
+        backend = self.backend
+        phi, var, b, bvar = backend.estimate()
         t_prev = self._t
         head: dict[float, tuple[float, float]] = {}
         for tf in frames:
@@ -640,7 +560,7 @@ class StreamingFusion(ABC):
             phi += mo.dG - b * mo.dM
             var += mo.dV + mo.dM * mo.dM * bvar
             for m, r in fuse:
-                ref = head.get(m.t_ref) or self._bk_frame_estimate(m.t_ref)
+                ref = head.get(m.t_ref) or backend.frame_estimate(m.t_ref)
                 if ref is not None:
                     v_vis = ref[1] + r
                     phi = (phi * v_vis + (ref[0] + m.dphi) * var) / (var + v_vis)
@@ -652,5 +572,5 @@ class StreamingFusion(ABC):
     def _level_shift(self, sup: ModeSupervisor) -> float:
         """The key frame's estimate moved by the back end's shift: a level change to ease in
         shortly after a re-acquisition; otherwise the state is output as it is."""
-        shift = self._bk_take_level_shift()
+        shift = self.backend.take_level_shift()
         return shift if self._t - sup.reacquired_t <= self._capture else 0.0

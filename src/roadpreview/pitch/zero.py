@@ -8,7 +8,7 @@ from roadpreview.camera import CameraModel
 from roadpreview.pitch.base import PitchEstimate, validate_correspondences
 
 
-class NoCompensation:
+class ZeroPitchEstimator:
     """Always reports zero pitch, so ``y_c = y``: the uncompensated baseline."""
 
     name = "none"
