@@ -39,7 +39,6 @@ __all__ = [
     "auc",
     "best_f_threshold",
     "confusion",
-    "rates_at",
     "require_sklearn",
     "roc_curve",
 ]
@@ -348,40 +347,3 @@ def best_f_threshold(scores: ArrayLike, labels: ArrayLike) -> float:
     # every distinct score (tp + fp counts at least the items at that score)
     f = 2 * tp / (tp + fp + n_pos)
     return float(thr[int(np.argmax(f))])  # argmax: first maximum = highest threshold
-
-
-def rates_at(scores: ArrayLike, labels: ArrayLike, thresholds: ArrayLike) -> tuple[Array, Array]:
-    """True- and false-positive rates of ``score >= threshold`` at each of ``thresholds``.
-
-    Parameters
-    ----------
-    scores, labels : array_like, shape (n,)
-        See the module docstring.
-    thresholds : array_like
-        Any shape; ±inf allowed, NaN is an error.
-
-    Returns
-    -------
-    tpr, fpr : ndarray
-        Same shape as ``thresholds`` (note the order: tpr first). The rate of
-        a class absent from ``labels`` is NaN.
-    """
-    s, y = _check(scores, labels)
-    try:
-        thr = np.asarray(thresholds, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputDataError(f"thresholds: not an array of numbers ({exc})") from None
-    if np.isnan(thr).any():
-        raise InputDataError("thresholds: contains NaN")
-    flat = thr.ravel()
-    pos = np.sort(s[y])
-    neg = np.sort(s[~y])
-    # the number of values >= t is len - (the number of values < t)
-    n_tp = pos.size - np.searchsorted(pos, flat, side="left")
-    n_fp = neg.size - np.searchsorted(neg, flat, side="left")
-    tpr = n_tp / pos.size if pos.size else np.full(flat.shape, math.nan)
-    fpr = n_fp / neg.size if neg.size else np.full(flat.shape, math.nan)
-    return (
-        np.asarray(tpr, dtype=np.float64).reshape(thr.shape),
-        np.asarray(fpr, dtype=np.float64).reshape(thr.shape),
-    )
