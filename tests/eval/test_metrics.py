@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -11,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from roadpreview.errors import InputDataError
+from roadpreview.errors import InputDataError, MissingDependencyError
 from roadpreview.eval.metrics import (
     Confusion,
     auc,
@@ -292,3 +293,9 @@ def test_bad_input_names_the_argument(
 def test_bad_thresholds_name_the_argument() -> None:
     with pytest.raises(InputDataError, match=r"^threshold:"):
         confusion([0.1, 0.2], [0, 1], math.nan)
+
+
+def test_missing_scikit_learn_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "sklearn.metrics", None)  # import fails as if absent
+    with pytest.raises(MissingDependencyError, match=r"roadpreview\[eval\]"):
+        auc([0.1, 0.9], [0, 1])
