@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -11,13 +12,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from roadpreview.errors import InputDataError
+from roadpreview.errors import InputDataError, MissingDependencyError
 from roadpreview.eval.metrics import (
     Confusion,
     auc,
     best_f_threshold,
     confusion,
-    rates_at,
     roc_curve,
 )
 
@@ -173,9 +173,9 @@ def test_single_class_gives_nan_not_a_crash() -> None:
     fpr, tpr, _ = roc_curve(s, np.zeros(3, int))
     assert np.isnan(tpr).all()
     np.testing.assert_array_equal(fpr, [0, 1 / 3, 2 / 3, 1])
-    tpr_at, fpr_at = rates_at(s, np.ones(3, int), [0.5])
-    assert np.isnan(fpr_at).all()
-    np.testing.assert_array_equal(tpr_at, [2 / 3])
+    fpr, tpr, _ = roc_curve(s, np.ones(3, int))
+    assert np.isnan(fpr).all()
+    np.testing.assert_array_equal(tpr, [0, 1 / 3, 2 / 3, 1])
 
 
 # --- best F threshold ---------------------------------------------------------------------------
@@ -229,29 +229,15 @@ def test_best_f_threshold_matches_a_brute_force_loop(seed: int, ties: bool) -> N
     assert best_f_threshold(s, y) == _brute_force_best_f(s, y)
 
 
-# --- rates at thresholds ------------------------------------------------------------------------
-
-
-def test_rates_at_hand_computed_and_shape() -> None:
-    s, y = [1, 2, 2, 3], [0, 1, 0, 1]
-    tpr, fpr = rates_at(s, y, [math.inf, 2.5, 2, 0])
-    np.testing.assert_array_equal(tpr, [0, 0.5, 1, 1])
-    np.testing.assert_array_equal(fpr, [0, 0, 0.5, 1])
-    tpr2, fpr2 = rates_at(s, y, [[3, 1], [2, 10]])
-    assert tpr2.shape == fpr2.shape == (2, 2)
-    np.testing.assert_array_equal(tpr2, [[0.5, 1], [1, 0]])
-    tpr0, fpr0 = rates_at(s, y, 2.0)
-    assert tpr0.shape == ()
-    assert (float(tpr0), float(fpr0)) == (1.0, 0.5)
+# --- ROC against the confusion matrix ----------------------------------------------------------
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_rates_at_agrees_with_roc_curve_and_confusion(seed: int) -> None:
+def test_roc_curve_agrees_with_confusion(seed: int) -> None:
     s, y = _random_set(seed, ties=True)
     fpr, tpr, thr = roc_curve(s, y)
-    tpr_at, fpr_at = rates_at(s, y, thr)
-    np.testing.assert_array_equal(tpr_at, tpr)
-    np.testing.assert_array_equal(fpr_at, fpr)
+    assert thr[0] == math.inf
+    assert (fpr[0], tpr[0]) == (0.0, 0.0)
     for t, tp_rate, fp_rate in zip(thr[1:], tpr[1:], fpr[1:], strict=True):
         c = confusion(s, y, t)
         assert (c.tpr, c.fpr) == (tp_rate, fp_rate)
@@ -279,7 +265,6 @@ _FUNCTIONS: list[Callable[[Any, Any], object]] = [
     roc_curve,
     auc,
     best_f_threshold,
-    lambda s, y: rates_at(s, y, [0.5]),
 ]
 
 
@@ -308,5 +293,9 @@ def test_bad_input_names_the_argument(
 def test_bad_thresholds_name_the_argument() -> None:
     with pytest.raises(InputDataError, match=r"^threshold:"):
         confusion([0.1, 0.2], [0, 1], math.nan)
-    with pytest.raises(InputDataError, match=r"^thresholds:"):
-        rates_at([0.1, 0.2], [0, 1], [0.1, math.nan])
+
+
+def test_missing_scikit_learn_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "sklearn.metrics", None)  # import fails as if absent
+    with pytest.raises(MissingDependencyError, match=r"roadpreview\[eval\]"):
+        auc([0.1, 0.9], [0, 1])

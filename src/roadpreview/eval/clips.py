@@ -13,8 +13,10 @@ lead, start-up) are skipped; a clip without any s in its window scores 0 and
 is counted as "no lead".
 
 A background clip is *hard* when the ego crosses an anomaly while its score
-can see it: its own crossing moves y_c from 1 s (the detector window) before
-the score window to its end, so the hard window is ``(a - T, b)``.
+can see it: its own crossing moves y_c from T (the detector window,
+``[anomaly.std] window_s``) before the score window to its end, so the hard
+window is ``(a - T, b)``. The functions take T as ``detector_window_s``; the
+evaluation passes the configured one.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from roadpreview.anomaly.config import DetectorConfig
 from roadpreview.eval.runner import Trace
 from roadpreview.sim.dataset import Clip, clips_of_recording
 
@@ -36,13 +39,16 @@ BoolArray = NDArray[np.bool_]
 
 #: (a, b): the clip score is the maximum of s over [t_c + a, t_c + b], s
 SCORE_WINDOW_S: tuple[float, float] = (-0.2, 1.2)
-#: the detector's window T (paper: 30 frames at 30 fps)
-DETECTOR_WINDOW_S = 1.0
+#: the detector's window T by default: `DetectorConfig.window_s` (paper: 30 frames at 30 fps)
+DETECTOR_WINDOW_S = DetectorConfig().window_s
 
 
-def hard_window(score_window: tuple[float, float] = SCORE_WINDOW_S) -> tuple[float, float]:
+def hard_window(
+    score_window: tuple[float, float] = SCORE_WINDOW_S,
+    detector_window_s: float = DETECTOR_WINDOW_S,
+) -> tuple[float, float]:
     """Where an ego crossing (relative to the clip centre) can reach the clip's score."""
-    return score_window[0] - DETECTOR_WINDOW_S, score_window[1]
+    return score_window[0] - detector_window_s, score_window[1]
 
 
 @dataclass(frozen=True)
@@ -94,6 +100,7 @@ def draw_clips(
     ego_crossing_share: float = 0.3,
     clear_of_hits_only: bool = True,
     background_spacing_s: float | None = 2.5,
+    detector_window_s: float = DETECTOR_WINDOW_S,
 ) -> list[Clip]:
     """Positive and background clips of one recording (`clips_of_recording`), with the
     hard flag for backgrounds and a share of them on the ego's crossings."""
@@ -103,7 +110,7 @@ def draw_clips(
         np.random.default_rng(list(seed)),
         clip_half_s=clip_half_s,
         clearance_s=clearance_s,
-        hard_window_s=hard_window(window),
+        hard_window_s=hard_window(window, detector_window_s),
         ego_crossing_share=ego_crossing_share,
         clear_of_hits_only=clear_of_hits_only,
         background_spacing_s=background_spacing_s,
@@ -195,6 +202,7 @@ def tracked_clips(
     true_box: Array,
     centers: Sequence[float],
     window: tuple[float, float] = SCORE_WINDOW_S,
+    detector_window_s: float = DETECTOR_WINDOW_S,
 ) -> BoolArray:
     """Whether the tracker followed the true lead over the frames each clip's score
     depends on (``[t_c + a - T, t_c + b]``); the vision is shared, so any trace will do."""
@@ -202,7 +210,7 @@ def tracked_clips(
     good = box_iou(box, true_box[: len(trace)]) >= TRACKED_IOU
     out = []
     for c in centers:  # clips, not frames
-        lo = int(np.searchsorted(trace.t, c + window[0] - DETECTOR_WINDOW_S, side="left"))
+        lo = int(np.searchsorted(trace.t, c + window[0] - detector_window_s, side="left"))
         hi = int(np.searchsorted(trace.t, c + window[1], side="right"))
         out.append(hi > lo and float(good[lo:hi].mean()) >= TRACKED_SHARE)
     return np.asarray(out, dtype=np.bool_)
@@ -216,6 +224,7 @@ def score_table(
     *,
     boxes_by_recording: Mapping[str, Trace],
     tracked_window: tuple[float, float] = SCORE_WINDOW_S,
+    detector_window_s: float = DETECTOR_WINDOW_S,
 ) -> ClipTable:
     """All clips of a data set with every method's score (recording key -> clips,
     -> method scores, -> truth arrays ``frame_t_s``, ``lead_distance_m`` and
@@ -238,7 +247,9 @@ def score_table(
         truth = truth_by_recording[key]
         dist.append(np.interp(centers, truth["frame_t_s"], truth["lead_distance_m"]))
         boxes = boxes_by_recording[key]
-        tracked.append(tracked_clips(boxes, truth["lead_box_px"], centers, tracked_window))
+        tracked.append(
+            tracked_clips(boxes, truth["lead_box_px"], centers, tracked_window, detector_window_s)
+        )
     return ClipTable(
         clips=clips,
         scores={m: np.concatenate(v) for m, v in scores.items()},
@@ -256,6 +267,7 @@ def background_windows(
     window: tuple[float, float] = SCORE_WINDOW_S,
     start_s: float = 2.5,
     lead_response_s: tuple[float, float] = (-0.3, 1.0),
+    detector_window_s: float = DETECTOR_WINDOW_S,
 ) -> Array:
     """Centres of background windows every ``step_s`` whose score cannot see any lead
     crossing: the lead's response ``[t_l + r0, t_l + r1]`` stays outside the y_c the
@@ -264,7 +276,7 @@ def background_windows(
     if not len(lead_crossings) or not t.size:
         return t
     tl = np.asarray(lead_crossings, dtype=np.float64)
-    lo = t[:, None] + window[0] - DETECTOR_WINDOW_S
+    lo = t[:, None] + window[0] - detector_window_s
     hi = t[:, None] + window[1]
     clash = (tl[None, :] + lead_response_s[1] >= lo) & (tl[None, :] + lead_response_s[0] <= hi)
     return t[~clash.any(axis=1)]

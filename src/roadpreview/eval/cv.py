@@ -9,12 +9,15 @@ threshold. Everything is reported for the entire set and for subsets of it
 
 Folds are stratified by label and, when the clips come from a few drives,
 grouped by drive: clips of one recording share the lead vehicle, the light
-and the road, so putting them on both sides of a split would leak.
+and the road, so putting them on both sides of a split would leak. The folds
+are scikit-learn's (`StratifiedGroupKFold`, `StratifiedKFold` without groups;
+the ``roadpreview[eval]`` extra).
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
@@ -30,6 +33,7 @@ from roadpreview.eval.metrics import (
     auc,
     best_f_threshold,
     confusion,
+    require_sklearn,
 )
 
 IndexArray = NDArray[np.intp]
@@ -105,60 +109,38 @@ def stratified_group_folds(
 
     Notes
     -----
-    Without groups the positives and the negatives are shuffled and dealt
-    round-robin, so every fold holds floor or ceil of n_pos / k positives and
-    of n_neg / k negatives, and fold sizes differ by at most one.
+    Without groups: `sklearn.model_selection.StratifiedKFold` (shuffled), so
+    every fold holds floor or ceil of n_pos / k positives and of n_neg / k
+    negatives.
 
-    With groups the assignment is greedy: groups in random order, then
-    largest first (size relative to the class totals), each to the fold where
-    it raises the sum over classes of (fold count / class total)² the least,
-    i.e. where its classes are least filled so far; ties go to the fold with
-    fewer items, then to the lower fold number. No fold is left empty. How
-    well the label counts balance depends on the group sizes.
+    With groups: `sklearn.model_selection.StratifiedGroupKFold` (shuffled): a
+    greedy assignment of whole groups, each to the fold where it keeps the
+    class shares of the folds closest to each other. How well the label
+    counts balance depends on the group sizes.
     """
     y = as_labels(labels)
     k = _check_k(k)
     n = y.size
-    rng = np.random.default_rng(seed)
+    ms = require_sklearn("sklearn.model_selection")
     if groups is None:
         if k > n:
             raise InputDataError(f"k: {k} folds need at least {k} items, got {n}")
-        pos = rng.permutation(np.flatnonzero(y))
-        neg = rng.permutation(np.flatnonzero(~y))
-        fold_of = np.empty(n, dtype=np.intp)
-        fold_of[np.r_[pos, neg]] = np.arange(n) % k  # negatives continue the positives' deal
-        return [np.flatnonzero(fold_of == f) for f in range(k)]
-
-    gid = _group_ids(groups, n)
-    n_groups = int(gid.max()) + 1
-    if k > n_groups:
-        raise InputDataError(
-            f"k: {k} folds need at least {k} groups, got {n_groups} (groups are never split)"
-        )
-    # per group: [positives, negatives]
-    counts = np.stack(
-        [np.bincount(gid[y], minlength=n_groups), np.bincount(gid[~y], minlength=n_groups)],
-        axis=1,
-    ).astype(np.float64)
-    totals = counts.sum(axis=0)
-    weight = np.divide(1.0, totals, out=np.zeros(2), where=totals > 0)
-    rel = counts * weight  # each group's share of each class
-    order = rng.permutation(n_groups)
-    order = order[np.argsort(-rel[order].sum(axis=1), kind="stable")]
-
-    fold_rel = np.zeros((k, 2))  # each fold's share of each class so far
-    fold_n = np.zeros(k)
-    fold_of_group = np.empty(n_groups, dtype=np.intp)
-    for g in order:
-        # increase of sum_c (fold_rel + rel_g)² is 2 fold_rel·rel_g + const
-        cost = fold_rel @ rel[g]
-        best = np.flatnonzero(cost == cost.min())
-        f = int(best[np.argmin(fold_n[best])])
-        fold_of_group[g] = f
-        fold_rel[f] += rel[g]
-        fold_n[f] += counts[g].sum()
-    fold_of = fold_of_group[gid]
-    return [np.flatnonzero(fold_of == f) for f in range(k)]
+        splitter = ms.StratifiedKFold(n_splits=k, shuffle=True, random_state=seed)
+        gid: IndexArray | None = None
+    else:
+        gid = _group_ids(groups, n)
+        n_groups = int(gid.max()) + 1
+        if k > n_groups:
+            raise InputDataError(
+                f"k: {k} folds need at least {k} groups, got {n_groups} (groups are never split)"
+            )
+        splitter = ms.StratifiedGroupKFold(n_splits=k, shuffle=True, random_state=seed)
+    with warnings.catch_warnings():
+        # "the least populated class has fewer members than n_splits": expected with few
+        # anomalies; the folds then hold 0 or 1 of them
+        warnings.filterwarnings("ignore", "The least populated class", UserWarning)
+        splits = splitter.split(np.zeros(n), y.astype(np.int8), gid)
+        return [np.sort(np.asarray(test, dtype=np.intp)) for _, test in splits]
 
 
 # ---------------------------------------------------------------------------------------------

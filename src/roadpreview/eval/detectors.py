@@ -46,10 +46,6 @@ class DetectorTrace:
     road_class: str | None = None
     seconds: float = math.nan  #: CPU time of the run, s
 
-    @property
-    def frames(self) -> int:
-        return int(self.t.size)
-
 
 def run_detector(
     trace: Trace, anomaly: AnomalyConfig, detector: str | None = None

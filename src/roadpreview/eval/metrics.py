@@ -11,20 +11,23 @@ Conventions, shared by every function here:
 * A set with a single class is not an error: metrics that need both classes
   (AUC, balanced accuracy, the ROC axis of the missing class) are NaN.
 
-Everything is vectorised: one sort (or one ranking) per call, no Python loop
-over items or thresholds.
+Everything is vectorised: one sort per call, no Python loop over items or
+thresholds. The ROC curve and the AUC are scikit-learn's (`sklearn.metrics`, the
+``roadpreview[eval]`` extra, imported on use); this module checks the input and
+keeps the conventions above (NaN for a missing class instead of a warning).
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import rankdata
 
-from roadpreview.errors import InputDataError
+from roadpreview.errors import InputDataError, MissingDependencyError
 
 Array = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -36,9 +39,30 @@ __all__ = [
     "auc",
     "best_f_threshold",
     "confusion",
-    "rates_at",
+    "require_sklearn",
     "roc_curve",
 ]
+
+
+def require_sklearn(module: str = "sklearn") -> ModuleType:
+    """Import ``module`` of scikit-learn (the evaluation's optional dependency).
+
+    Raises
+    ------
+    MissingDependencyError
+        scikit-learn is not installed; the message names the extra to install.
+    """
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        if exc.name is None or exc.name.split(".")[0] != "sklearn":
+            raise
+        raise MissingDependencyError(
+            "the evaluation needs scikit-learn, which is not installed:"
+            " pip install 'roadpreview[eval]'"
+        ) from None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -251,7 +275,8 @@ def _sweep(s: Array, y: BoolArray) -> tuple[Array, NDArray[np.int64], NDArray[np
 
 
 def roc_curve(scores: ArrayLike, labels: ArrayLike) -> tuple[Array, Array, Array]:
-    """ROC curve: (fpr, tpr, thresholds) for every distinct score as a threshold.
+    """ROC curve: (fpr, tpr, thresholds) for every distinct score as a threshold
+    (`sklearn.metrics.roc_curve` without dropping intermediate points).
 
     Parameters
     ----------
@@ -271,32 +296,33 @@ def roc_curve(scores: ArrayLike, labels: ArrayLike) -> tuple[Array, Array, Array
         decision ``score >= thresholds[i]``.
     """
     s, y = _check(scores, labels)
-    thr, tp, fp = _sweep(s, y)
-    n_pos = int(np.count_nonzero(y))
-    n_neg = s.size - n_pos
-    tp = np.r_[0, tp]
-    fp = np.r_[0, fp]
-    tpr = tp / n_pos if n_pos else np.full(tp.shape, math.nan)
-    fpr = fp / n_neg if n_neg else np.full(fp.shape, math.nan)
-    return fpr.astype(np.float64), tpr.astype(np.float64), np.r_[math.inf, thr]
+    sk = require_sklearn("sklearn.metrics")
+    undefined = require_sklearn("sklearn.exceptions").UndefinedMetricWarning
+    with warnings.catch_warnings():
+        # a missing class: scikit-learn warns and gives that axis as NaN, as documented here
+        warnings.simplefilter("ignore", undefined)
+        fpr, tpr, thr = sk.roc_curve(y.astype(np.int8), s, drop_intermediate=False)
+    return (
+        np.asarray(fpr, dtype=np.float64),
+        np.asarray(tpr, dtype=np.float64),
+        np.asarray(thr, dtype=np.float64),
+    )
 
 
 def auc(scores: ArrayLike, labels: ArrayLike) -> float:
-    """Area under the ROC curve; NaN unless both classes are present.
+    """Area under the ROC curve (`sklearn.metrics.roc_auc_score`); NaN unless both
+    classes are present.
 
-    Computed as the Mann-Whitney statistic U / (n_pos n_neg) from mid-ranks:
-    the fraction of (positive, negative) pairs in which the positive scores
-    higher, a tie counting 1/2. This equals the trapezoidal area under
-    `roc_curve`.
+    This is the Mann-Whitney statistic U / (n_pos n_neg): the fraction of
+    (positive, negative) pairs in which the positive scores higher, a tie
+    counting 1/2; the trapezoidal area under `roc_curve`.
     """
     s, y = _check(scores, labels)
     n_pos = int(np.count_nonzero(y))
-    n_neg = s.size - n_pos
-    if n_pos == 0 or n_neg == 0:
+    if n_pos == 0 or n_pos == s.size:
         return math.nan
-    ranks = rankdata(s)  # average ranks of ties, 1-based
-    u = float(ranks[y].sum()) - n_pos * (n_pos + 1) / 2
-    return u / (n_pos * n_neg)
+    sk = require_sklearn("sklearn.metrics")
+    return float(sk.roc_auc_score(y.astype(np.int8), s))
 
 
 def best_f_threshold(scores: ArrayLike, labels: ArrayLike) -> float:
@@ -321,40 +347,3 @@ def best_f_threshold(scores: ArrayLike, labels: ArrayLike) -> float:
     # every distinct score (tp + fp counts at least the items at that score)
     f = 2 * tp / (tp + fp + n_pos)
     return float(thr[int(np.argmax(f))])  # argmax: first maximum = highest threshold
-
-
-def rates_at(scores: ArrayLike, labels: ArrayLike, thresholds: ArrayLike) -> tuple[Array, Array]:
-    """True- and false-positive rates of ``score >= threshold`` at each of ``thresholds``.
-
-    Parameters
-    ----------
-    scores, labels : array_like, shape (n,)
-        See the module docstring.
-    thresholds : array_like
-        Any shape; ±inf allowed, NaN is an error.
-
-    Returns
-    -------
-    tpr, fpr : ndarray
-        Same shape as ``thresholds`` (note the order: tpr first). The rate of
-        a class absent from ``labels`` is NaN.
-    """
-    s, y = _check(scores, labels)
-    try:
-        thr = np.asarray(thresholds, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputDataError(f"thresholds: not an array of numbers ({exc})") from None
-    if np.isnan(thr).any():
-        raise InputDataError("thresholds: contains NaN")
-    flat = thr.ravel()
-    pos = np.sort(s[y])
-    neg = np.sort(s[~y])
-    # the number of values >= t is len - (the number of values < t)
-    n_tp = pos.size - np.searchsorted(pos, flat, side="left")
-    n_fp = neg.size - np.searchsorted(neg, flat, side="left")
-    tpr = n_tp / pos.size if pos.size else np.full(flat.shape, math.nan)
-    fpr = n_fp / neg.size if neg.size else np.full(flat.shape, math.nan)
-    return (
-        np.asarray(tpr, dtype=np.float64).reshape(thr.shape),
-        np.asarray(fpr, dtype=np.float64).reshape(thr.shape),
-    )

@@ -25,13 +25,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from roadpreview.eval.clips import ClipTable
+from roadpreview.eval.experiments.base import jf as _f
 from roadpreview.eval.metrics import auc
 from roadpreview.pipeline.truthmatch import match_alerts
 from roadpreview.types import Alert, Confirmation, FusionMode
@@ -173,13 +173,6 @@ def _tally(
     )
 
 
-def _f(x: Any) -> float | None:
-    if x is None:
-        return None
-    v = float(x)
-    return v if math.isfinite(v) else None
-
-
 # -- operating points ---------------------------------------------------------------------
 def _folds(keys: Sequence[str], k: int, seed: int) -> list[list[str]]:
     order = list(keys)
@@ -309,6 +302,13 @@ def svar_mask(data: EvalData, table: ClipTable) -> BoolArray:
     return keep
 
 
+def _auc(scores: Array, labels: BoolArray) -> float:
+    """`auc`, and NaN for an empty subset (which `auc` refuses)."""
+    if not labels.any() or labels.all():
+        return math.nan
+    return auc(scores, labels)
+
+
 def svar_subset(data: EvalData) -> dict[str, Any]:
     """AUC (entire, hard) of each detector and method on the SVAR-like subset."""
     out: dict[str, Any] = {}
@@ -331,12 +331,6 @@ def svar_subset(data: EvalData) -> dict[str, Any]:
             "methods": res,
         }
     return {"felt_mps2": SVAR_FELT_MPS2, "detectors": out}
-
-
-def _auc(scores: Array, labels: BoolArray) -> float:
-    if not labels.any() or labels.all():
-        return math.nan
-    return auc(scores, labels)
 
 
 # -- height, confidence, confirmation -----------------------------------------------------
@@ -538,8 +532,9 @@ def road_classes(data: EvalData, dataset: str, method: str) -> dict[str, Any]:
     }
 
 
-def e6_product(data: EvalData, fig_dir: Path) -> dict[str, Any]:
-    """Every product figure of this module (module docstring)."""
+def e6_product(data: EvalData) -> dict[str, Any]:
+    """Every product figure of this module (module docstring), JSON-ready; the reliability
+    diagram of ``calibration`` is drawn by `roadpreview.eval.figures.plot_reliability`."""
     ref = data.methods.reference
     wild_rows = matched_alerts(data, "wild", ref)
     out: dict[str, Any] = {
@@ -554,7 +549,6 @@ def e6_product(data: EvalData, fig_dir: Path) -> dict[str, Any]:
     }
     if data.product_detector == "two-axle":
         out["calibration"] = calibration(data, ref)
-        out["reliability_figure"] = _reliability_figure(out["calibration"], fig_dir)
     if data.jobs.get("generalization"):
         gen_rows = matched_alerts(data, "generalization", ref)
         out["height"]["generalization"] = height_errors(gen_rows)
@@ -562,28 +556,6 @@ def e6_product(data: EvalData, fig_dir: Path) -> dict[str, Any]:
         out["road_class"]["generalization"] = road_classes(data, "generalization", ref)
         out["generalization"] = generalization(data, ref)
     return out
-
-
-def _reliability_figure(cal: Mapping[str, Any], fig_dir: Path) -> str:
-    from roadpreview.eval.experiments import _plt, _save
-
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(4.8, 4.4))
-    for name, style in (("wild_cross_fitted", "o-"), ("generalization_shipped", "s--")):
-        r = cal.get(name)
-        if not r or not r["bins"]:
-            continue
-        conf = [b["confidence"] for b in r["bins"]]
-        freq = [b["frequency"] for b in r["bins"]]
-        ece = r["ece"]
-        ax.plot(conf, freq, style, label=f"{name.replace('_', ' ')} (ECE {ece:.2f}, n={r['n']})")
-    ax.plot([0, 1], [0, 1], ":", color="0.5")
-    ax.set_xlabel("alert confidence")
-    ax.set_ylabel("share of alerts that were real")
-    ax.set_title("E6: confidence reliability")
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=7)
-    return _save(fig, fig_dir / "e6_reliability.png")
 
 
 __all__ = [

@@ -1,5 +1,7 @@
-"""The evaluation report: Markdown tables and figures from ``results.json``, and the
-console summary (Table I and the headline figures).
+"""The evaluation report: the experiments' results with their figures (`run_experiments`,
+the numbers of `roadpreview.eval.experiments` drawn by `roadpreview.eval.figures`), then
+Markdown tables from ``results.json`` and the console summary (Table I and the headline
+figures).
 
 The report is regenerated whole by ``roadpreview evaluate --report PATH``; its
 figures are copied next to it into ``eval/`` and linked relatively.
@@ -14,11 +16,16 @@ import shutil
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from roadpreview.anomaly import DETECTORS
-from roadpreview.eval.product import THRESHOLD_FIELDS
-from roadpreview.eval.suite import EvalResults
+from roadpreview.eval import experiments as ex
+from roadpreview.eval import figures
+from roadpreview.eval.plan import EXPERIMENTS
+from roadpreview.eval.product import THRESHOLD_FIELDS, e6_product
+
+if TYPE_CHECKING:
+    from roadpreview.eval.suite import EvalResults
 
 #: subsets of Table I, in column order
 TABLE1_SUBSETS = ("entire", "hard", "easy")
@@ -55,7 +62,7 @@ def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     return "\n".join(lines)
 
 
-#: Table I's last row: the true compensated trajectory (`experiments.ceiling_s`)
+#: Table I's last row: the true compensated trajectory (`experiments.ceiling_scores`)
 CEILING_LABEL = "truth-compensated y (ceiling, not a method)"
 
 
@@ -63,6 +70,62 @@ def _label(d: Mapping[str, Any], m: str) -> str:
     if m == "ceiling":
         return CEILING_LABEL
     return str(d["methods"][m]["label"])
+
+
+# -- the experiments and their figures ----------------------------------------------------------
+def run_experiments(
+    data: ex.EvalData,
+    fig_dir: Path,
+    experiments: Sequence[str] = EXPERIMENTS,
+    *,
+    default_threshold_px: float = 1.0,
+) -> dict[str, Any]:
+    """Each experiment of ``experiments`` on ``data``, its figure drawn into ``fig_dir``:
+    ``results.json``'s ``results`` (the result's ``as_dict()`` with its figure's file
+    name). ``default_threshold_px``: E3's common threshold (the configured one)."""
+    res: dict[str, Any] = {}
+
+    def with_figure(numbers: dict[str, Any], name: str) -> dict[str, Any]:
+        return {**numbers, "figure": name}
+
+    if "e4" in experiments:
+        t1 = ex.table1(data)
+        res["e4"] = with_figure(t1.as_dict(), figures.plot_roc(t1, fig_dir / "e4_roc.png"))
+    thresholds = ex.thresholds_of(data) if {"e3", "e5"} & set(experiments) else {}
+    if "e1" in experiments:
+        e1 = ex.signal_vs_distance(data)
+        path = fig_dir / "e1_signal_vs_distance.png"
+        res["e1"] = with_figure(e1.as_dict(), figures.plot_signal_vs_distance(e1, path))
+    if "e2" in experiments:
+        e2 = ex.ego_bump(data)
+        res["e2"] = with_figure(
+            e2.as_dict(), figures.plot_ego_bump(e2, fig_dir / "e2_ego_bump.png")
+        )
+    if "e3" in experiments:
+        e3 = ex.fpr_vs_rotation(data, thresholds, default_threshold_px)
+        path = fig_dir / "e3_fpr_vs_rotation.png"
+        res["e3"] = with_figure(e3.as_dict(), figures.plot_fpr_vs_rotation(e3, path))
+    if "e5" in experiments:
+        tl = ex.texture_loss(data, thresholds)
+        rng = ex.detection_range(data)
+        lt = ex.lead_time(data)
+        res["e5"] = {
+            "texture_loss": with_figure(
+                tl.as_dict(), figures.plot_texture_loss(tl, fig_dir / "e5_texture_loss.png")
+            ),
+            "range": with_figure(rng.as_dict(), figures.plot_range(rng, fig_dir / "e5_range.png")),
+            "lead_time": with_figure(
+                lt.as_dict(), figures.plot_lead_time(lt, fig_dir / "e5_lead_time.png")
+            ),
+        }
+    if "e6" in experiments:
+        e6 = e6_product(data)
+        if "calibration" in e6:
+            e6["reliability_figure"] = figures.plot_reliability(
+                e6["calibration"], fig_dir / "e6_reliability.png"
+            )
+        res["e6"] = e6
+    return res
 
 
 # -- Table I ------------------------------------------------------------------------------------
@@ -435,7 +498,7 @@ def _e4_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
         w(
             "The last row is no method: it scores the *true* compensated trajectory (the "
             "rendered row of the lead's rear centre less the camera's true pitch, f tan φ, and "
-            "heave, f Δz / d; `experiments.ceiling_s`) with the same detector window, clip "
+            "heave, f Δz / d; `experiments.ceiling_scores`) with the same detector window, clip "
             "windows and folds. It is what perfect tracking, pitch and heave would reach on "
             "this data set: the share of it a method attains is the method's; the rest is the "
             "data set (anomalies the lead's suspension swallows, a rough road's own bouncing)."
@@ -499,7 +562,7 @@ def _e4_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
 
 
 def _by_signal_table(d: Mapping[str, Any], bs: Mapping[str, Any]) -> str:
-    """AUC per bin of expected signal (`experiments._auc_by_signal`), one column a method."""
+    """AUC per bin of expected signal (`experiments.table1.auc_by_signal`), one column a method."""
     bins = bs.get("bins") or []
     names = list(bins[0]["auc"]) if bins else []
     head = ["f abs(δ) / d (px)", "positives", *[_label(d, m) for m in names]]

@@ -19,9 +19,11 @@ from typing import Any
 from roadpreview import __version__
 from roadpreview.configtools import from_mapping, to_mapping
 from roadpreview.errors import ConfigError
-from roadpreview.eval import experiments as ex
+from roadpreview.eval.experiments import EvalData
 from roadpreview.eval.methods import METHODS, REFERENCE_METHOD, select_methods
+from roadpreview.eval.metrics import require_sklearn
 from roadpreview.eval.plan import EXPERIMENTS, EvalPlan
+from roadpreview.eval.report import run_experiments
 from roadpreview.eval.runner import MethodSet, RecordingOutcome, process_all
 from roadpreview.fusion import BACKENDS
 from roadpreview.pipeline.config import PipelineConfig
@@ -126,6 +128,7 @@ def run_evaluation(
 ) -> EvalResults:
     """Simulate and process the recordings the experiments need, run them, save results."""
     t_start = time.perf_counter()
+    require_sklearn()  # before the long part: the experiments' ROC, AUC and folds need it
     plan.validate()
     exps = tuple(e for e in EXPERIMENTS if e in experiments)
     out = Path(out)
@@ -155,33 +158,11 @@ def run_evaluation(
     outcomes = process_all(all_jobs, mset, workers=jobs, fresh=fresh, progress=on_done)
     proc_s = time.perf_counter() - t_proc
 
-    data = ex.EvalData(plan=plan, methods=mset, jobs=job_sets)
-    fig_dir = out / "figures"
-    res: dict[str, Any] = {}
+    data = EvalData(plan=plan, methods=mset, jobs=job_sets)
     t_exp = time.perf_counter()
-    if "e4" in exps:
-        res["e4"] = ex.e4_table1(data, fig_dir)
-    thresholds: dict[str, float] | None = None
-    if {"e3", "e5"} & set(exps):
-        thresholds = ex.thresholds_of(data)
-    if "e1" in exps:
-        res["e1"] = ex.e1_signal_vs_distance(data, fig_dir)
-    if "e2" in exps:
-        res["e2"] = ex.e2_ego_bump(data, fig_dir)
-    if "e3" in exps and thresholds is not None:
-        res["e3"] = ex.e3_fpr_vs_rotation(
-            data, fig_dir, thresholds, base.anomaly.std.threshold_px
-        )
-    if "e5" in exps and thresholds is not None:
-        res["e5"] = {
-            "texture_loss": ex.e5_texture_loss(data, fig_dir, thresholds),
-            "range": ex.e5_range(data, fig_dir),
-            "lead_time": ex.e5_lead_time(data, fig_dir),
-        }
-    if "e6" in exps:
-        from roadpreview.eval.product import e6_product
-
-        res["e6"] = e6_product(data, fig_dir)
+    res = run_experiments(
+        data, out / "figures", exps, default_threshold_px=base.anomaly.std.threshold_px
+    )
     exp_s = time.perf_counter() - t_exp
 
     frames_gen = sum(o.frames for o in outcomes if o.generate_s > 0)
