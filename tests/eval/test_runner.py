@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import replace
+from dataclasses import astuple, replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from roadpreview.apps.replay import ReplayInputs, replay
 from roadpreview.errors import ConfigError
 from roadpreview.eval.clips import (
     SCORE_WINDOW_S,
@@ -31,6 +32,7 @@ from roadpreview.eval.runner import (
     run_methods,
 )
 from roadpreview.pipeline.config import PipelineConfig
+from roadpreview.pipeline.pipeline import Pipeline
 from roadpreview.sim.dataset import clips_of_recording
 from roadpreview.sim.presets import controlled
 from roadpreview.types import FusionMode
@@ -214,9 +216,28 @@ def test_every_method_gets_the_same_frames(make_recording) -> None:  # type: ign
     assert not np.all(ess["mode"] == int(FusionMode.DEGRADED))
 
 
-def test_traces_are_cached_and_reused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from roadpreview.pipeline import core
+def test_the_reference_trace_is_a_plain_replay(make_recording) -> None:  # type: ignore[no-untyped-def]
+    """The evaluation runs the same loop as a replay: the fused-kalman trace equals the
+    replay's per-frame results exactly (the other methods only add pipelines)."""
+    rec = make_recording("controlled", seed=0, duration_s=3.0, width=320, height=180)
+    methods = MethodSet.build(PipelineConfig(), select_methods(["uncompensated", "fused-kalman"]))
+    trace = run_methods(rec.folder, methods)["fused-kalman"]
+    inputs = ReplayInputs.from_recording(rec.folder)
+    result = replay(inputs, methods.configs["fused-kalman"], keep_results=True)
+    assert result.results is not None
+    frames = result.results
+    assert len(frames) == len(trace) == rec.info["n_frames"]
+    t0 = result.video_start_s
+    np.testing.assert_array_equal(trace.t, [r.t - t0 for r in frames])
+    for col in ("y", "y_c", "phi", "phi_std", "lead_distance_m", "heave_px"):
+        np.testing.assert_array_equal(trace[col], [getattr(r, col) for r in frames], err_msg=col)
+    np.testing.assert_array_equal(trace["mode"], [int(r.mode) for r in frames])
+    for a, b in zip(trace.samples(), frames, strict=True):  # the detector's input
+        assert b.sample is not None
+        np.testing.assert_equal(astuple(a), astuple(replace(b.sample, t=b.sample.t - t0)))
 
+
+def test_traces_are_cached_and_reused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     cfg = controlled(0, gap_m=8.0)
     cfg = replace(
         cfg,
@@ -226,13 +247,13 @@ def test_traces_are_cached_and_reused(tmp_path: Path, monkeypatch: pytest.Monkey
     job = RecordingJob("controlled", "short", cfg, tmp_path)
     methods = MethodSet.build(PipelineConfig(), select_methods(["uncompensated", "fused-kalman"]))
     built = []
-    original = core.Pipeline.__init__
+    original = Pipeline.__init__
 
     def counting_init(self, *args, **kwargs):  # type: ignore[no-untyped-def]
         built.append(1)
         original(self, *args, **kwargs)
 
-    monkeypatch.setattr(core.Pipeline, "__init__", counting_init)
+    monkeypatch.setattr(Pipeline, "__init__", counting_init)
     first = process_recording(job, methods)
     assert first.generate_s > 0
     assert first.evaluate_s > 0

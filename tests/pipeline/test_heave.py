@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from scipy.signal import butter, sosfiltfilt
 
 from roadpreview.apps.replay import ReplayInputs, replay
-from roadpreview.canbus import load_database
+from roadpreview.canbus import load_database, read_can_log
 from roadpreview.canbus.dbc import IMU_ACCEL
 from roadpreview.fusion.heave import HeaveConfig
 from roadpreview.loop import run

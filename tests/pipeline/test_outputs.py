@@ -1,6 +1,7 @@
 """The CAN sinks (`roadpreview.sinks.can`) as the run loop drives them: per alert RP_ALERT
-then RP_ALERT_DETAIL with the same AlertId, RP_CONFIRM at the frame that decided it, RP_STATUS + RP_ROAD_STATUS every period;
-everything E2E-valid and decoded back by cantools and by `OutputDecoder`."""
+then RP_ALERT_DETAIL with the same AlertId, RP_CONFIRM at the frame that decided it,
+RP_STATUS + RP_ROAD_STATUS every period; everything E2E-valid and decoded back by cantools
+and by `OutputDecoder`."""
 
 from __future__ import annotations
 

@@ -5,6 +5,10 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import cv2
@@ -23,7 +27,7 @@ from roadpreview.canbus.output import (
 from roadpreview.cli.main import main
 from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.pipeline import Pipeline, PipelineConfig
-from roadpreview.types import FusionMode
+from roadpreview.types import CameraFrame, FusionMode
 
 
 @pytest.fixture(scope="module")
@@ -128,7 +132,7 @@ def test_corrupt_frame_in_the_middle_loses_no_other_frame(short_demo, tmp_path: 
 def test_garbage_frames_are_no_target_not_a_crash(short_demo) -> None:  # type: ignore[no-untyped-def]
     pipe = Pipeline(short_demo.camera, PipelineConfig())
     for i, frame in enumerate([None, np.zeros((720, 1280, 3), np.uint8), np.zeros((10, 10)), "x"]):
-        r = pipe.push(CameraFrame(0.1 * (i + 1), frame))
+        r = pipe.push(CameraFrame(0.1 * (i + 1), frame))  # type: ignore[arg-type]
         assert not r.lead_found
         assert r.vision_reason
         assert math.isnan(r.y_c)
@@ -149,3 +153,38 @@ def test_example_configuration_loads_and_unknown_keys_are_named(tmp_path: Path) 
     bad.write_text("[fusion]\nbackend = 'kalman'\nbakend = 'x'\n")
     with pytest.raises(ConfigError, match=r"fusion\.bakend"):
         PipelineConfig.load(bad)
+
+
+def test_sigint_during_replay_keeps_every_alert_emitted_so_far(short_demo, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Ctrl-C in the middle of a drive: the outputs are complete and readable up to that
+    point, and the summary says the replay was interrupted."""
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "roadpreview", "replay", str(short_demo.folder),
+         "--out", str(out), "--pace", "1.0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    alerts_jsonl = out / "alerts.jsonl"
+    deadline = time.monotonic() + 60.0
+    # streamed: the first alert is on disk while the replay runs
+    while time.monotonic() < deadline and proc.poll() is None:
+        if alerts_jsonl.is_file() and alerts_jsonl.read_text().strip():
+            break
+        time.sleep(0.02)
+    assert proc.poll() is None, "the replay ended before it could be interrupted"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60.0)
+    assert proc.returncode == 130, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True
+    assert 0 < summary["frames"] < int(short_demo.info["n_frames"])
+    lines = [json.loads(x) for x in alerts_jsonl.read_text().splitlines()]
+    assert len(lines) == summary["alerts"] >= 1
+    rows = (out / "frames.csv").read_text().splitlines()
+    assert len(rows) == summary["frames"] + 1  # every processed frame, and the header
+    can_alerts = [
+        m for m in read_can_log(out / "alerts.blf", errors="raise") if m.arbitration_id == 0x200
+    ]
+    assert [m.data[2] for m in can_alerts] == [a["alert_id"] % 256 for a in lines]

@@ -38,7 +38,8 @@ def _pitch_integral(
     phase: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     w = 2 * np.pi * freq
-    return np.sum(-amp / w * np.cos(w * t[:, None] + phase), axis=1)
+    out: NDArray[np.float64] = np.sum(-amp / w * np.cos(w * t[:, None] + phase), axis=1)
+    return out
 
 
 def _pitch(
@@ -47,7 +48,8 @@ def _pitch(
     freq: NDArray[np.float64],
     phase: NDArray[np.float64],
 ) -> NDArray[np.float64]:
-    return np.sum(amp * np.sin(2 * np.pi * freq * t[:, None] + phase), axis=1)
+    out: NDArray[np.float64] = np.sum(amp * np.sin(2 * np.pi * freq * t[:, None] + phase), axis=1)
+    return out
 
 
 def synthetic_drive(

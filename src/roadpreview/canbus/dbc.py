@@ -70,7 +70,7 @@ def _packaged_database() -> Database:
     name = f"roadpreview/{'/'.join(DBC_RESOURCE)}"
     try:
         db = cantools.database.load_string(dbc_text(), database_format="dbc", strict=True)
-    except (cantools.database.UnsupportedDatabaseFormatError, ValueError) as exc:
+    except (cantools.database.errors.UnsupportedDatabaseFormatError, ValueError) as exc:
         raise _dbc_error(name, exc) from None
     assert isinstance(db, Database)
     return db
@@ -101,7 +101,7 @@ def load_database(path: str | Path | None = None, *, strict: bool = True) -> Dat
         db = cantools.database.load_file(path, database_format="dbc", strict=strict)
     except FileNotFoundError:
         raise InputDataError(f"{path}: DBC file not found") from None
-    except (cantools.database.UnsupportedDatabaseFormatError, ValueError, OSError) as exc:
+    except (cantools.database.errors.UnsupportedDatabaseFormatError, ValueError, OSError) as exc:
         raise _dbc_error(path, exc) from None
     if not isinstance(db, Database):
         raise InputDataError(f"{path}: not a CAN database")

@@ -46,4 +46,5 @@ class ImuMeasurements:
     @property
     def rates_rad_s(self) -> Array:
         """(n, 3) [roll rate, pitch rate (nose up +), yaw rate] in roadpreview's convention."""
-        return self.gyro_rad_s * RATE_SIGNS
+        rates: Array = self.gyro_rad_s * RATE_SIGNS
+        return rates

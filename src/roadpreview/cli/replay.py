@@ -34,6 +34,14 @@ def add_subparser(sub: Any) -> None:
         help="time of the first frame on the log clock (s); default: first CAN frame",
     )
     p.add_argument(
+        "--pace",
+        type=float,
+        default=None,
+        metavar="RATE",
+        help="play at RATE times the recorded speed (1: real time); default: as fast as"
+        " possible",
+    )
+    p.add_argument(
         "--truth",
         action="store_true",
         help="simulator folder: match the alerts to the true events and print them",
@@ -51,7 +59,7 @@ def _run(args: argparse.Namespace) -> int:
     )
     from roadpreview.camera import CameraModel
     from roadpreview.errors import ConfigError
-    from roadpreview.loop import install_signal_handlers
+    from roadpreview.loop import Pace, install_signal_handlers
 
     if args.input.is_dir():
         inputs = ReplayInputs.from_recording(args.input)
@@ -81,6 +89,7 @@ def _run(args: argparse.Namespace) -> int:
             annotated_video=args.annotate,
             progress=print_progress,
             stop=stop,
+            pace=Pace(args.pace) if args.pace else None,
         )
     finally:
         handlers.restore()

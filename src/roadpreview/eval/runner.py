@@ -390,7 +390,7 @@ def trace_keys(methods: MethodSet, job: RecordingJob) -> dict[str, str]:
 def _trajectory_settings(cfg: PipelineConfig) -> dict[str, Any]:
     """The settings a trace depends on: all but the detectors' (``[anomaly]``), which run on
     the stored trajectory afterwards."""
-    out = to_mapping(cfg)
+    out: dict[str, Any] = to_mapping(cfg)
     out.pop("anomaly", None)
     return out
 

@@ -17,7 +17,9 @@ from roadpreview import configtools
 from roadpreview.anomaly.config import AnomalyConfig
 from roadpreview.configtools import param
 from roadpreview.ego.vertical import EgoVerticalConfig
+from roadpreview.fusion import BACKENDS
 from roadpreview.fusion.heave import HeaveConfig
+from roadpreview.pitch import ESTIMATORS
 from roadpreview.vision.frontend import VisionConfig
 
 
@@ -26,7 +28,7 @@ class PitchStageConfig:
     """``[pitch]``: which estimator and its options (see ``roadpreview.pitch``)."""
 
     estimator: str = param(
-        "robust", choices=("robust", "essential", "none"), help="the paper's robust LM by default"
+        "robust", choices=tuple(ESTIMATORS), help="the paper's robust LM by default"
     )
     options: dict[str, Any] = field(default_factory=dict)
     min_points: int = param(
@@ -40,7 +42,7 @@ class FusionStageConfig:
 
     backend: str = param(
         "kalman",
-        choices=("kalman", "factor-graph", "visual-only", "imu-only", "none"),
+        choices=tuple(BACKENDS),
         help="filterpy Kalman filter by default",
     )
     options: dict[str, Any] = field(default_factory=dict)

@@ -41,8 +41,9 @@ from roadpreview.canbus.imu_csv import IMU_CSV_COLUMNS as IMU_CSV_COLUMNS
 from roadpreview.canbus.imu_csv import IMU_CSV_COMMENT as _CSV_COMMENT
 from roadpreview.canbus.imu_csv import read_imu_csv as read_imu_csv
 from roadpreview.canbus.logio import write_can_log
+from roadpreview.canbus.samples import ImuMeasurements
 from roadpreview.errors import InputDataError
-from roadpreview.sim.imu import DEG, KMH, ImuMeasurements, ImuSamples, SpeedSamples
+from roadpreview.sim.imu import DEG, KMH, ImuSamples, SpeedSamples
 
 log = logging.getLogger(__name__)
 

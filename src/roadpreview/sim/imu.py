@@ -36,6 +36,7 @@ from scipy.integrate import cumulative_trapezoid
 from roadpreview.canbus.samples import RATE_SIGNS, ImuMeasurements
 from roadpreview.configtools import check_ranges, param
 from roadpreview.errors import ConfigError, InputDataError
+from roadpreview.sim.frames import body_to_world
 
 DEG = math.pi / 180.0
 KMH = 1.0 / 3.6  # m/s per km/h
@@ -289,12 +290,14 @@ class ImuSamples:
     @property
     def rates_rad_s(self) -> Array:
         """(n, 3) measured [roll, pitch (nose up +), yaw] rates."""
-        return self.gyro_rad_s * RATE_SIGNS
+        rates: Array = self.gyro_rad_s * RATE_SIGNS
+        return rates
 
     @property
     def true_rates_rad_s(self) -> Array:
         """(n, 3) true [roll, pitch (nose up +), yaw] rates."""
-        return self.true_gyro_rad_s * RATE_SIGNS
+        rates: Array = self.true_gyro_rad_s * RATE_SIGNS
+        return rates
 
     def measurements(self) -> ImuMeasurements:
         """Only what the sensor delivers (stamped times, measured values)."""
@@ -360,7 +363,8 @@ def _sample_grid(t_truth: Array, rate_hz: float, what: str) -> Array:
             f"{what}: the truth covers {t_truth[-1] - t_truth[0]:.4f} s, shorter than one"
             f" sample interval ({period:.4f} s)"
         )
-    return t_truth[0] + period * np.arange(1, n + 1)
+    times: Array = t_truth[0] + period * np.arange(1, n + 1)
+    return times
 
 
 def _resample(t_truth: Array, x: Array, t_samples: Array, period: float, mode: str) -> Array:
@@ -404,21 +408,7 @@ def rotation_body_to_world(attitude: ArrayLike) -> Array:
     order), with ISO's pitch angle equal to minus ours.
     """
     att = np.asarray(attitude, dtype=np.float64).reshape(-1, 3)
-    cr, sr = np.cos(att[:, 0]), np.sin(att[:, 0])
-    # ISO pitch = -pitch: cos unchanged, sin flips
-    cp, sp_iso = np.cos(att[:, 1]), -np.sin(att[:, 1])
-    cy, sy = np.cos(att[:, 2]), np.sin(att[:, 2])
-    r = np.empty((len(att), 3, 3))
-    r[:, 0, 0] = cy * cp
-    r[:, 0, 1] = cy * sp_iso * sr - sy * cr
-    r[:, 0, 2] = cy * sp_iso * cr + sy * sr
-    r[:, 1, 0] = sy * cp
-    r[:, 1, 1] = sy * sp_iso * sr + cy * cr
-    r[:, 1, 2] = sy * sp_iso * cr - cy * sr
-    r[:, 2, 0] = -sp_iso
-    r[:, 2, 1] = cp * sr
-    r[:, 2, 2] = cp * cr
-    return r
+    return body_to_world(att[:, 1], att[:, 0], att[:, 2])
 
 
 def body_rates_from_euler(t: ArrayLike, attitude: ArrayLike) -> Array:
@@ -439,7 +429,8 @@ def body_rates_from_euler(t: ArrayLike, attitude: ArrayLike) -> Array:
     p = droll + dyaw * np.sin(pitch)
     q = -dpitch * np.cos(roll) + dyaw * np.sin(roll) * np.cos(pitch)
     r = dpitch * np.sin(roll) + dyaw * np.cos(roll) * np.cos(pitch)
-    return np.column_stack([p, q, r]) * RATE_SIGNS
+    rates: Array = np.column_stack([p, q, r]) * RATE_SIGNS
+    return rates
 
 
 # ---------------------------------------------------------------------------------------------

@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import cv2
 import numpy as np
@@ -33,6 +33,8 @@ from roadpreview.errors import InputDataError
 
 #: the files a folder must hold to be a recording
 REQUIRED = ("scenario.toml", "camera.toml", "truth.npz", "truth.json")
+_R = TypeVar("_R", bound="RecordingFolder")
+
 #: CAN log names, in the order they are looked for
 CAN_LOGS = ("can.blf", "can.asc", "can.log")
 
@@ -48,7 +50,7 @@ class RecordingFolder:
     info: dict[str, Any]  #: truth.json
 
     @classmethod
-    def open(cls, folder: str | Path) -> RecordingFolder:
+    def open(cls: type[_R], folder: str | Path) -> _R:
         folder = Path(folder)
         for name in REQUIRED:
             if not (folder / name).is_file():

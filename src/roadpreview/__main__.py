@@ -1,0 +1,7 @@
+"""``python -m roadpreview``: the command line (`roadpreview.cli.main`)."""
+
+import sys
+
+from roadpreview.cli.main import main
+
+sys.exit(main())
