@@ -6,7 +6,7 @@
 * `imu_csv`: phone-style IMU CSV files.
 * `output`: `Alert` / `ConfirmationResult` / `Status` -> E2E-protected frames, and back.
 * `logio`: CAN log files in every format python-can reads (BLF, ASC, candump, TRC, CSV, .gz).
-* `live`: python-can buses, a bounded-queue listener, sending.
+* `live`: python-can buses, a bounded-queue listener, a log played onto a bus.
 
 The names below are imported lazily (PEP 562): ``import roadpreview.canbus`` loads no
 python-can bus, DBC or E2E code until one of them is used.
@@ -24,7 +24,6 @@ _EXPORTS = {
     "BoundedQueueListener": "roadpreview.canbus.live",
     "CanInputDecoder": "roadpreview.canbus.decode",
     "CanLogReader": "roadpreview.canbus.logio",
-    "CanOutput": "roadpreview.canbus.live",
     "CanReceiver": "roadpreview.canbus.live",
     "ConfirmEncoder": "roadpreview.canbus.output",
     "DETECTOR_CODES": "roadpreview.canbus.output",

@@ -1,4 +1,4 @@
-"""Live CAN: send alerts and status on any python-can bus, receive through a bounded queue.
+"""Live CAN: open any python-can bus, receive through a bounded queue, play a log onto a bus.
 
 * `open_bus` opens ``can.Bus(interface=..., channel=...)`` (socketcan, pcan,
   vector, virtual, ...) and turns python-can's errors into ours.
@@ -7,18 +7,12 @@
   the queue was full. Decoding happens in the consumer, never in python-can's
   ``Notifier`` thread.
 * `CanReceiver` wires a ``can.Notifier`` to such a listener.
-* `CanOutput` sends ``RP_ALERT`` + ``RP_ALERT_DETAIL`` per alert and
-  ``RP_CONFIRM`` per checked alert when asked, and ``RP_STATUS`` +
-  ``RP_ROAD_STATUS`` every 100 ms with ``bus.send_periodic``; each periodic
-  frame is re-encoded from the latest `Status` with the next alive counter
-  and CRC (python-can's ``modifier_callback``), so the status stays
-  E2E-valid between updates.
 * `replay` plays a recorded log onto a bus at its recorded pace
   (``can.MessageSync``), for bench tests of a receiver.
 
-Logging to a file: a ``can.Logger`` is itself a listener; pass it to
-`CanReceiver` (``extra_listeners``) or write sent frames with
-``roadpreview.canbus.write_can_log``.
+Sending roadpreview's outputs is `roadpreview.sinks.can.CanBusSink`: the run loop
+schedules the status for a bus and a log alike. Logging to a file: a ``can.Logger`` is
+itself a listener; pass it to `CanReceiver` (``extra_listeners``).
 """
 
 from __future__ import annotations
@@ -26,16 +20,13 @@ from __future__ import annotations
 import logging
 import queue
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from types import TracebackType
 from typing import Any
 
 import can
-from cantools.database.can import Database
 
-from roadpreview.canbus.output import OutputEncoders, RoadStatusEncoder, StatusEncoder
 from roadpreview.errors import ConfigError, MissingDependencyError, OperationError
-from roadpreview.types import Alert, ConfirmationResult, Status
 
 log = logging.getLogger(__name__)
 
@@ -172,125 +163,3 @@ def replay(
             ) from None
         count += 1
     return count
-
-
-class CanOutput:
-    """Send roadpreview's outputs on a bus (module docstring).
-
-    ``send_alert`` sends an alert's ``RP_ALERT`` and ``RP_ALERT_DETAIL`` frames
-    now, ``send_confirmation`` one ``RP_CONFIRM``, ``send_status`` /
-    ``send_road_status`` one ``RP_STATUS`` / ``RP_ROAD_STATUS``. ``start_status``
-    starts both periodic status messages; ``update_status`` changes what their
-    next frames carry. ``detector`` (``anomaly.detector``) goes into
-    ``RP_ALERT_DETAIL``. ``sent`` keeps every frame sent by this object when
-    ``keep_sent`` is true (for logging them afterwards).
-    """
-
-    def __init__(
-        self,
-        bus: can.BusABC,
-        db: Database | None = None,
-        *,
-        keep_sent: bool = False,
-        detector: str = "two-axle",
-    ) -> None:
-        self.bus = bus
-        self.encoders = OutputEncoders(db, detector=detector)
-        self.keep_sent = keep_sent
-        self.sent: list[can.Message] = []
-        self.alerts_sent = 0
-        self._latest: Status | None = None
-        self._tasks: list[can.broadcastmanager.CyclicSendTaskABC] = []
-        self._lock = threading.Lock()
-
-    def _send(self, msg: can.Message) -> can.Message:
-        try:
-            self.bus.send(msg)
-        except can.CanError as exc:
-            raise OperationError(f"CAN send of 0x{msg.arbitration_id:X} failed ({exc})") from None
-        if self.keep_sent:
-            self.sent.append(msg)
-        return msg
-
-    def send_alert(self, alert: Alert, *, timestamp: float | None = None) -> list[can.Message]:
-        """Encode and send one alert: its ``RP_ALERT`` frame, then its ``RP_ALERT_DETAIL``."""
-        with self._lock:
-            frames = self.encoders.alert_frames(alert, timestamp=timestamp)
-            self.alerts_sent += 1
-        return [self._send(m) for m in frames]
-
-    def send_confirmation(
-        self,
-        result: ConfirmationResult,
-        precision: float | None = None,
-        *,
-        timestamp: float | None = None,
-    ) -> can.Message:
-        """Encode and send one ``RP_CONFIRM`` frame (``precision``: the running precision
-        after ``result``, 0..1; None: not available)."""
-        with self._lock:
-            msg = self.encoders.confirm.encode(result, precision, timestamp=timestamp)
-        return self._send(msg)
-
-    def send_status(self, status: Status, *, timestamp: float = 0.0) -> can.Message:
-        """Encode and send one ``RP_STATUS`` frame now."""
-        with self._lock:
-            msg = self.encoders.status.encode(status, timestamp=timestamp)
-        return self._send(msg)
-
-    def send_road_status(self, status: Status, *, timestamp: float = 0.0) -> can.Message:
-        """Encode and send one ``RP_ROAD_STATUS`` frame now."""
-        with self._lock:
-            msg = self.encoders.road.encode(status, timestamp=timestamp)
-        return self._send(msg)
-
-    def update_status(self, status: Status) -> None:
-        """What the next periodic status frames (both messages) report."""
-        self._latest = status
-
-    def _refresher(
-        self, encoder: StatusEncoder | RoadStatusEncoder
-    ) -> Callable[[can.Message], None]:
-        """python-can's modifier callback: re-encode the periodic frame before each send."""
-
-        def refresh(msg: can.Message) -> None:
-            status = self._latest
-            if status is None:  # pragma: no cover - start_status sets it first
-                return
-            with self._lock:
-                fresh = encoder.encode(status)
-            msg.data = fresh.data
-            if self.keep_sent:
-                self.sent.append(fresh)
-
-        return refresh
-
-    def start_status(self, status: Status, period_s: float = STATUS_PERIOD_S) -> None:
-        """Send ``RP_STATUS`` and ``RP_ROAD_STATUS`` every ``period_s`` from now on
-        (``bus.send_periodic``)."""
-        if self._tasks:
-            raise OperationError("the periodic status is already running")
-        self._latest = status
-        try:
-            for encoder in (self.encoders.status, self.encoders.road):
-                message = encoder.message
-                # a template: python-can calls the modifier before every send, the first included
-                template = can.Message(
-                    arbitration_id=message.frame_id,
-                    is_extended_id=False,
-                    dlc=message.length,
-                    data=bytes(message.length),
-                )
-                self._tasks.append(
-                    self.bus.send_periodic(
-                        template, period_s, modifier_callback=self._refresher(encoder)
-                    )
-                )
-        except (can.CanError, NotImplementedError) as exc:
-            self.stop()
-            raise OperationError(f"periodic status on this bus failed ({exc})") from None
-
-    def stop(self) -> None:
-        """Stop the periodic status messages (the bus stays open)."""
-        while self._tasks:
-            self._tasks.pop().stop()
