@@ -34,7 +34,7 @@ import queue
 import signal
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from types import FrameType
 from typing import Any, Protocol
@@ -151,7 +151,8 @@ class _LiveMerge:
         self.latency_s = latency_s
         self.stop = stop
         self.queue: queue.Queue[Sample | _End] = queue.Queue(maxsize=queue_size)
-        self.queue_drops = 0
+        self.queue_drops = 0  #: samples lost because the queue was full
+        self.frames_dropped = 0  #: frames skipped because a newer one was due
         self._threads = [
             threading.Thread(target=self._pump, args=(s,), name=f"source:{s.name}", daemon=True)
             for s in sources
@@ -193,6 +194,48 @@ class _LiveMerge:
         for th in self._threads:
             th.start()
 
+    def samples(
+        self, watchdogs: Sequence[Watchdog], *, poll_s: float, keep_running: bool
+    ) -> Iterator[tuple[Sample, bool]]:
+        """The samples in time order, each with whether a watchdog injected it (module
+        docstring); ends with the last file source, never with a live one."""
+        self.start()
+        heap: list[tuple[tuple[float, int], int, Sample]] = []
+        seq = 0
+        files_open = sum(not s.live for s in self.sources)
+        ends_by_itself = files_open > 0 and not keep_running
+        while not self.stop.is_set():
+            try:  # take what arrived, waiting at most poll_s for the first item
+                item: Sample | _End | None = self.queue.get(timeout=poll_s)
+            except queue.Empty:
+                item = None
+            while item is not None:
+                if isinstance(item, _End):
+                    files_open -= not item.source.live
+                else:
+                    if self.pace is not None:
+                        self.pace.start(item.t_s)  # a live source's first sample anchors it
+                    heapq.heappush(heap, (merge_key(item), seq, item))
+                    seq += 1
+                try:
+                    item = self.queue.get_nowait()
+                except queue.Empty:
+                    item = None
+            ended = ends_by_itself and files_open == 0
+            horizon = math.inf if ended else self.clock() - self.latency_s
+            ready: list[Sample] = []
+            while heap and heap[0][2].t_s <= horizon:
+                ready.append(heapq.heappop(heap)[2])
+            frames = [i for i, s in enumerate(ready) if isinstance(s, CameraFrame)]
+            skip = set(frames[:-1]) if not ended else set()  # behind: only the newest frame
+            self.frames_dropped += len(skip)
+            yield from ((s, False) for i, s in enumerate(ready) if i not in skip)
+            if ended:
+                return
+            if not ready:
+                for wd in watchdogs:  # on the released samples' clock
+                    yield from ((s, True) for s in wd.check(horizon))
+
     def close(self) -> None:
         for s in self.sources:
             s.close()
@@ -226,25 +269,25 @@ def run(
     live = pace is not None or any(s.live for s in sources)
     merge: _LiveMerge | None = None
     try:
-        if not live:
-            for sample in merge_sources(sources):
-                if stop.is_set():
-                    summary.interrupted = True
-                    break
-                state.push(sample, watchdogs)
-                if progress is not None and state.new_frame and summary.frames % 30 == 0:
-                    progress(summary.frames, time.perf_counter() - wall0)
-                if max_frames is not None and summary.frames >= max_frames:
-                    summary.interrupted = True
-                    break
-        else:
+        stream: Iterator[tuple[Sample, bool]]
+        if live:
             merge = _LiveMerge(
                 sources, pace=pace, latency_s=latency_s, stop=stop, queue_size=queue_size
             )
-            merge.start()
-            _run_live(
-                merge, state, watchdogs, stop, poll_s, max_frames, progress, wall0, keep_running
-            )
+            stream = merge.samples(watchdogs, poll_s=poll_s, keep_running=keep_running)
+        else:
+            stream = ((sample, False) for sample in merge_sources(sources))
+        cut = False  # stopped by max_frames
+        for sample, injected in stream:
+            if stop.is_set():
+                break
+            state.push(sample, watchdogs, injected=injected)
+            if progress is not None and state.new_frame and summary.frames % 30 == 0:
+                progress(summary.frames, time.perf_counter() - wall0)
+            if max_frames is not None and summary.frames >= max_frames:
+                cut = True
+                break
+        summary.interrupted = cut or stop.is_set()
     except KeyboardInterrupt:  # Ctrl-C without a handler: stop like a signal does
         summary.interrupted = True
         log.warning("event=interrupted frames=%d", summary.frames)
@@ -257,6 +300,7 @@ def run(
             stop.set()
             merge.close()
             summary.queue_drops = merge.queue_drops
+            summary.frames_dropped = merge.frames_dropped
         try:
             state.finish()
         finally:
@@ -269,67 +313,6 @@ def run(
                     summary.sink_errors += 1
                     log.exception("event=sink_close_failed sink=%s", type(sink).__name__)
     return summary
-
-
-def _run_live(
-    merge: _LiveMerge,
-    state: _LoopState,
-    watchdogs: Sequence[Watchdog],
-    stop: threading.Event,
-    poll_s: float,
-    max_frames: int | None,
-    progress: Callable[[int, float], None] | None,
-    wall0: float,
-    keep_running: bool,
-) -> None:
-    summary = state.summary
-    heap: list[tuple[tuple[float, int], int, Sample]] = []
-    seq = 0
-    # a live source has no end; the run ends with the last file source (unless keep_running)
-    files_open = sum(not s.live for s in merge.sources)
-    ends_by_itself = files_open > 0 and not keep_running
-    while not stop.is_set():
-        # take what arrived (wait at most poll_s for the first item)
-        try:
-            item: Sample | _End | None = merge.queue.get(timeout=poll_s)
-        except queue.Empty:
-            item = None
-        while item is not None:
-            if isinstance(item, _End):
-                files_open -= not item.source.live
-            else:
-                if merge.pace is not None:
-                    merge.pace.start(item.t_s)  # a live source's first sample anchors it
-                heapq.heappush(heap, (merge_key(item), seq, item))
-                seq += 1
-            try:
-                item = merge.queue.get_nowait()
-            except queue.Empty:
-                item = None
-        ended = ends_by_itself and files_open == 0
-        horizon = math.inf if ended else merge.clock() - merge.latency_s
-        ready: list[Sample] = []
-        while heap and heap[0][2].t_s <= horizon:
-            ready.append(heapq.heappop(heap)[2])
-        frames = [i for i, s in enumerate(ready) if isinstance(s, CameraFrame)]
-        skip = set(frames[:-1]) if not ended else set()  # fell behind: only the newest frame
-        summary.frames_dropped += len(skip)
-        for i, sample in enumerate(ready):
-            if i in skip:
-                continue
-            state.push(sample, watchdogs)
-            if progress is not None and state.new_frame and summary.frames % 30 == 0:
-                progress(summary.frames, time.perf_counter() - wall0)
-            if max_frames is not None and summary.frames >= max_frames:
-                summary.interrupted = True
-                return
-        if ended:
-            return
-        if not ready:
-            for wd in watchdogs:  # on the released samples' clock
-                for sample in wd.check(horizon):
-                    state.push(sample, watchdogs, injected=True)
-    summary.interrupted = True
 
 
 class _LoopState:

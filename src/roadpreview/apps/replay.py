@@ -28,7 +28,7 @@ from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.pipeline import FrameResult, Pipeline
 from roadpreview.pipeline.truthmatch import MatchReport, match_alerts
 from roadpreview.sinks import Sink
-from roadpreview.sinks.can import CanLogSink
+from roadpreview.sinks.can import CanLogSink, CanMemorySink
 from roadpreview.sinks.files import (
     AlertsJsonlSink,
     AnnotatedVideoSink,
@@ -175,7 +175,9 @@ def replay(
     collected = ResultsSink() if keep_results else None
     if collected is not None:
         sinks.append(collected)
-    if out_dir is not None:
+    if out_dir is None:  # the CAN output is encoded anyway (what an ECU would get), kept here
+        sinks.append(CanMemorySink(detector=config.anomaly.detector))
+    else:
         out_dir.mkdir(parents=True, exist_ok=True)
         truth_times = [
             start + float(e["lead_front_t_s"])

@@ -15,7 +15,165 @@ python-can bus, DBC or E2E code until one of them is used.
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # the real names for type checkers; at run time they load lazily
+    from roadpreview.canbus.dbc import (
+        E2E_COUNTER_MODULUS as E2E_COUNTER_MODULUS,
+    )
+    from roadpreview.canbus.dbc import (
+        IMU_ACCEL as IMU_ACCEL,
+    )
+    from roadpreview.canbus.dbc import (
+        IMU_RATES as IMU_RATES,
+    )
+    from roadpreview.canbus.dbc import (
+        RESERVED_OUTPUT_IDS as RESERVED_OUTPUT_IDS,
+    )
+    from roadpreview.canbus.dbc import (
+        RP_ALERT as RP_ALERT,
+    )
+    from roadpreview.canbus.dbc import (
+        RP_ALERT_DETAIL as RP_ALERT_DETAIL,
+    )
+    from roadpreview.canbus.dbc import (
+        RP_CONFIRM as RP_CONFIRM,
+    )
+    from roadpreview.canbus.dbc import (
+        RP_ROAD_STATUS as RP_ROAD_STATUS,
+    )
+    from roadpreview.canbus.dbc import (
+        RP_STATUS as RP_STATUS,
+    )
+    from roadpreview.canbus.dbc import (
+        VEHICLE_SPEED as VEHICLE_SPEED,
+    )
+    from roadpreview.canbus.dbc import (
+        WHEEL_SPEEDS as WHEEL_SPEEDS,
+    )
+    from roadpreview.canbus.dbc import (
+        check_protected as check_protected,
+    )
+    from roadpreview.canbus.dbc import (
+        e2e_layout as e2e_layout,
+    )
+    from roadpreview.canbus.dbc import (
+        encode_protected as encode_protected,
+    )
+    from roadpreview.canbus.dbc import (
+        load_database as load_database,
+    )
+    from roadpreview.canbus.decode import (
+        CanInputDecoder as CanInputDecoder,
+    )
+    from roadpreview.canbus.decode import (
+        DecodeStats as DecodeStats,
+    )
+    from roadpreview.canbus.decode import (
+        FrameProblem as FrameProblem,
+    )
+    from roadpreview.canbus.decode import (
+        decode_log as decode_log,
+    )
+    from roadpreview.canbus.decode import (
+        split_samples as split_samples,
+    )
+    from roadpreview.canbus.imu_csv import (
+        IMU_CSV_COLUMNS as IMU_CSV_COLUMNS,
+    )
+    from roadpreview.canbus.imu_csv import (
+        imu_samples as imu_samples,
+    )
+    from roadpreview.canbus.imu_csv import (
+        read_imu_csv as read_imu_csv,
+    )
+    from roadpreview.canbus.live import (
+        BoundedQueueListener as BoundedQueueListener,
+    )
+    from roadpreview.canbus.live import (
+        CanReceiver as CanReceiver,
+    )
+    from roadpreview.canbus.live import (
+        open_bus as open_bus,
+    )
+    from roadpreview.canbus.live import (
+        replay as replay,
+    )
+    from roadpreview.canbus.logio import (
+        CanLogReader as CanLogReader,
+    )
+    from roadpreview.canbus.logio import (
+        LogProblem as LogProblem,
+    )
+    from roadpreview.canbus.logio import (
+        read_can_log as read_can_log,
+    )
+    from roadpreview.canbus.logio import (
+        write_can_log as write_can_log,
+    )
+    from roadpreview.canbus.mapping import (
+        QUANTITIES as QUANTITIES,
+    )
+    from roadpreview.canbus.mapping import (
+        InputMapping as InputMapping,
+    )
+    from roadpreview.canbus.mapping import (
+        available_mappings as available_mappings,
+    )
+    from roadpreview.canbus.mapping import (
+        bind_mapping as bind_mapping,
+    )
+    from roadpreview.canbus.mapping import (
+        load_mapping as load_mapping,
+    )
+    from roadpreview.canbus.output import (
+        DETECTOR_CODES as DETECTOR_CODES,
+    )
+    from roadpreview.canbus.output import (
+        AlertDetailEncoder as AlertDetailEncoder,
+    )
+    from roadpreview.canbus.output import (
+        AlertEncoder as AlertEncoder,
+    )
+    from roadpreview.canbus.output import (
+        ConfirmEncoder as ConfirmEncoder,
+    )
+    from roadpreview.canbus.output import (
+        OutputDecoder as OutputDecoder,
+    )
+    from roadpreview.canbus.output import (
+        OutputEncoders as OutputEncoders,
+    )
+    from roadpreview.canbus.output import (
+        ReceivedAlert as ReceivedAlert,
+    )
+    from roadpreview.canbus.output import (
+        ReceivedAlertDetail as ReceivedAlertDetail,
+    )
+    from roadpreview.canbus.output import (
+        ReceivedConfirm as ReceivedConfirm,
+    )
+    from roadpreview.canbus.output import (
+        ReceivedOutput as ReceivedOutput,
+    )
+    from roadpreview.canbus.output import (
+        ReceivedRoadStatus as ReceivedRoadStatus,
+    )
+    from roadpreview.canbus.output import (
+        ReceivedStatus as ReceivedStatus,
+    )
+    from roadpreview.canbus.output import (
+        RoadStatusEncoder as RoadStatusEncoder,
+    )
+    from roadpreview.canbus.output import (
+        StatusEncoder as StatusEncoder,
+    )
+    from roadpreview.canbus.output import (
+        alert_frames as alert_frames,
+    )
+    from roadpreview.canbus.output import (
+        detector_code as detector_code,
+    )
 
 #: public name -> the module that defines it
 _EXPORTS = {

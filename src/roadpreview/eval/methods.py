@@ -108,8 +108,8 @@ def select_methods(names: list[str] | None = None) -> dict[str, MethodSpec]:
 class NanStdFallback:
     """A pitch estimator whose successful results get ``std`` when theirs is NaN.
 
-    The evaluation's adapter for `MethodSpec.nan_std_rad` (installed on the
-    method's ``Pipeline.pitch``); everything else passes through unchanged.
+    The evaluation's adapter for `MethodSpec.nan_std_rad` (given to the method's
+    `Pipeline` as its ``pitch`` estimator); everything else passes through unchanged.
     """
 
     def __init__(self, inner: PitchEstimator, std: float) -> None:

@@ -98,7 +98,13 @@ _NOT_RECORDING = ("sim/presets.py", "sim/dataset.py")
 
 #: the modules outside sim/ that a recording is written with (camera model, log and CSV
 #: writers, the sample conventions)
-_RECORDING_DEPS = ("camera.py", "canbus/imu_csv.py", "canbus/logio.py", "canbus/samples.py")
+_RECORDING_DEPS = (
+    "camera.py",
+    "types.py",
+    "canbus/imu_csv.py",
+    "canbus/logio.py",
+    "canbus/samples.py",
+)
 
 
 @cache
