@@ -56,7 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, signal
 
-from roadpreview.anomaly.base import AnomalyEvent, DetectorFrame, TrajectorySample
+from roadpreview.anomaly.base import AnomalyEvent, DetectorFrame, TrajectorySample, run_frames
 from roadpreview.anomaly.config import TwoAxleConfig
 from roadpreview.anomaly.response import TemplateBank
 from roadpreview.anomaly.suppression import SuppressionTracker
@@ -997,23 +997,8 @@ class TwoAxleDetector:
 
     def run(self, samples: Iterable[TrajectorySample]) -> TwoAxleRun:
         """Push every sample, flush, and return per-frame arrays and all events."""
-        rows: list[tuple[float, ...]] = []
-        events: list[AnomalyEvent] = []
-        for sample in samples:
-            events.extend(self.push(sample))
-            f = self._frame
-            assert f is not None
-            rows.append(
-                (f.t, f.score, f.t_score, f.height_m, f.background_m, float(int(f.suppressed)))
-            )
-        events.extend(self.flush())
-        table = np.array(rows, dtype=np.float64).reshape(-1, 6)
-        return TwoAxleRun(
-            t=table[:, 0].copy(),
-            score=table[:, 1].copy(),
-            t_score=table[:, 2].copy(),
-            height_m=table[:, 3].copy(),
-            background_m=table[:, 4].copy(),
-            suppressed=table[:, 5].astype(np.int64),
-            events=events,
+        columns, suppressed, events = run_frames(
+            self, samples, ("t", "score", "t_score", "height_m", "background_m")
         )
+        t, score, t_score, height_m, background_m = columns
+        return TwoAxleRun(t, score, t_score, height_m, background_m, suppressed, events)

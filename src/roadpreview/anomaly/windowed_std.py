@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from roadpreview.anomaly.base import AnomalyEvent, DetectorFrame, TrajectorySample
+from roadpreview.anomaly.base import AnomalyEvent, DetectorFrame, TrajectorySample, run_frames
 from roadpreview.anomaly.config import DetectorConfig
 from roadpreview.anomaly.nms import OnsetPicker, PeakPicker
 from roadpreview.anomaly.running import WindowedMoments
@@ -245,21 +245,8 @@ class WindowedStdDetector:
 
     def run(self, samples: Iterable[TrajectorySample]) -> DetectorRun:
         """Push every sample, flush, and return per-frame arrays and all events."""
-        rows: list[tuple[float, float, float, float, float, int]] = []
-        events: list[AnomalyEvent] = []
-        for sample in samples:
-            events.extend(self.push(sample))
-            f = self._frame
-            assert f is not None
-            rows.append((f.t, f.s, f.s_left, f.s_right, f.threshold_px, int(f.suppressed)))
-        events.extend(self.flush())
-        table = np.array(rows, dtype=np.float64).reshape(-1, 6)
-        return DetectorRun(
-            t=table[:, 0].copy(),
-            s=table[:, 1].copy(),
-            s_left=table[:, 2].copy(),
-            s_right=table[:, 3].copy(),
-            threshold_px=table[:, 4].copy(),
-            suppressed=table[:, 5].astype(np.int64),
-            events=events,
+        columns, suppressed, events = run_frames(
+            self, samples, ("t", "s", "s_left", "s_right", "threshold_px")
         )
+        t, s, s_left, s_right, threshold_px = columns
+        return DetectorRun(t, s, s_left, s_right, threshold_px, suppressed, events)
