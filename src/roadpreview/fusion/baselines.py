@@ -28,7 +28,32 @@ class _Clock:
         self.last = t
 
 
-class VisualOnlyPitch:
+class _InputsIgnored:
+    """The inputs a comparison back end does not use: accepted and ignored.
+
+    Each back end overrides the calls it does use (`VisualOnlyPitch` the visual ones,
+    `ImuOnlyPitch` the gyro's); `ZeroPitchFusion` uses none.
+    """
+
+    def push_gyro(
+        self,
+        t: float,
+        pitch_rate: float,
+        *,
+        roll_rate: float | None = None,
+        yaw_rate: float | None = None,
+    ) -> bool:
+        """Accepted and ignored (True: not rejected)."""
+        return True
+
+    def push_visual(self, meas: VisualPitch) -> None:
+        """Ignored."""
+
+    def push_vision_failure(self, t: float, reason: str) -> None:
+        """Ignored."""
+
+
+class VisualOnlyPitch(_InputsIgnored):
     """The paper's compensation: the visual pitch alone, chained over key frames.
 
     phi(t) = phi(t_ref) + dphi for the frame's measurement; a key frame the
@@ -53,16 +78,6 @@ class VisualOnlyPitch:
         self._var = 0.0
         self._bad = 0
         self._started = False
-
-    def push_gyro(
-        self,
-        t: float,
-        pitch_rate: float,
-        *,
-        roll_rate: float | None = None,
-        yaw_rate: float | None = None,
-    ) -> bool:
-        return True
 
     def push_visual(self, meas: VisualPitch) -> None:
         v = self.config.vision
@@ -116,7 +131,7 @@ class VisualOnlyPitch:
         )
 
 
-class ImuOnlyPitch:
+class ImuOnlyPitch(_InputsIgnored):
     """The integrated gyro: phi(t) = ∫ (ω - b) dt from the first frame, b fixed (default 0).
 
     The paper's IMU comparison, which drifts with the uncorrected bias. Gyro
@@ -150,12 +165,6 @@ class ImuOnlyPitch:
         yaw_rate: float | None = None,
     ) -> bool:
         return self.gyro.push(t, pitch_rate)
-
-    def push_visual(self, meas: VisualPitch) -> None:
-        """Ignored: this back end uses the gyro alone."""
-
-    def push_vision_failure(self, t: float, reason: str) -> None:
-        """Ignored."""
 
     def estimate(self, t: float) -> FusedPitch:
         self._clock.check(t)
@@ -192,7 +201,7 @@ class ImuOnlyPitch:
         )
 
 
-class ZeroPitchFusion:
+class ZeroPitchFusion(_InputsIgnored):
     """The paper's other baseline: pitch 0 (y_c = y), std infinite, mode DEGRADED."""
 
     name = "none"
@@ -202,22 +211,6 @@ class ZeroPitchFusion:
 
     def reset(self) -> None:
         self._clock = _Clock()
-
-    def push_gyro(
-        self,
-        t: float,
-        pitch_rate: float,
-        *,
-        roll_rate: float | None = None,
-        yaw_rate: float | None = None,
-    ) -> bool:
-        return True
-
-    def push_visual(self, meas: VisualPitch) -> None:
-        """Ignored."""
-
-    def push_vision_failure(self, t: float, reason: str) -> None:
-        """Ignored."""
 
     def estimate(self, t: float) -> FusedPitch:
         self._clock.check(t)
