@@ -18,6 +18,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from roadpreview.errors import InputDataError
 from roadpreview.types import FusionMode, Side, SuppressionReason
 
 
@@ -146,6 +147,34 @@ class Detector(Protocol):
     def frame(self) -> DetectorFrame | None:
         """The output for the last pushed sample (None before the first)."""
         ...
+
+
+class LastFrame:
+    """`Detector.frame` for a detector that keeps its last output in ``_frame``."""
+
+    _frame: DetectorFrame | None
+
+    @property
+    def frame(self) -> DetectorFrame | None:
+        """The output for the last pushed sample (None before the first)."""
+        return self._frame
+
+
+def next_time(t: float, t_last: float) -> float:
+    """A pushed sample's time ``t`` as a float, checked to be finite and after ``t_last``.
+
+    Raises
+    ------
+    InputDataError
+        When it is not.
+    """
+    t = float(t)
+    if not math.isfinite(t) or t <= t_last:
+        raise InputDataError(
+            f"trajectory sample t = {t!r} s: times must be finite and increase"
+            f" (previous {t_last} s)"
+        )
+    return t
 
 
 def run_frames(
