@@ -31,9 +31,13 @@ class _Clock:
 class _InputsIgnored:
     """The inputs a comparison back end does not use: accepted and ignored.
 
-    Each back end overrides the calls it does use (`VisualOnlyPitch` the visual ones,
-    `ImuOnlyPitch` the gyro's); `ZeroPitchFusion` uses none.
+    `VisualOnlyPitch` overrides the visual calls; the gyro's pitch rate goes into the
+    back end's ``gyro`` history when it has one (`ImuOnlyPitch`); `ZeroPitchFusion` uses
+    nothing. Roll and yaw rates are not used by any of them.
     """
+
+    #: where pushed pitch rates go (None: the gyro is ignored)
+    gyro: GyroHistory | None = None
 
     def push_gyro(
         self,
@@ -43,8 +47,10 @@ class _InputsIgnored:
         roll_rate: float | None = None,
         yaw_rate: float | None = None,
     ) -> bool:
-        """Accepted and ignored (True: not rejected)."""
-        return True
+        """The pitch rate into ``gyro`` (False: rejected there, logged); without a gyro
+        history accepted and ignored (True)."""
+        gyro = self.gyro
+        return True if gyro is None else gyro.push(t, pitch_rate)
 
     def push_visual(self, meas: VisualPitch) -> None:
         """Ignored."""
@@ -141,6 +147,7 @@ class ImuOnlyPitch(_InputsIgnored):
     """
 
     name = "imu-only"
+    gyro: GyroHistory  #: always one here
 
     def __init__(self, config: ImuOnlyConfig | None = None) -> None:
         self.config = config or ImuOnlyConfig()
@@ -155,16 +162,6 @@ class ImuOnlyPitch(_InputsIgnored):
         self._phi_c = 0.0
         self._var_c = 0.0
         self._dm_c = 0.0  # measured time since the start (for the bias uncertainty)
-
-    def push_gyro(
-        self,
-        t: float,
-        pitch_rate: float,
-        *,
-        roll_rate: float | None = None,
-        yaw_rate: float | None = None,
-    ) -> bool:
-        return self.gyro.push(t, pitch_rate)
 
     def estimate(self, t: float) -> FusedPitch:
         self._clock.check(t)
