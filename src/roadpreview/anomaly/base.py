@@ -10,9 +10,15 @@ non-maximum suppression. Detectors follow the `Detector` protocol.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
+from operator import attrgetter
 from typing import Protocol
 
+import numpy as np
+from numpy.typing import NDArray
+
+from roadpreview.errors import InputDataError
 from roadpreview.types import FusionMode, Side, SuppressionReason
 
 
@@ -141,3 +147,58 @@ class Detector(Protocol):
     def frame(self) -> DetectorFrame | None:
         """The output for the last pushed sample (None before the first)."""
         ...
+
+
+class LastFrame:
+    """`Detector.frame` for a detector that keeps its last output in ``_frame``."""
+
+    _frame: DetectorFrame | None
+
+    @property
+    def frame(self) -> DetectorFrame | None:
+        """The output for the last pushed sample (None before the first)."""
+        return self._frame
+
+
+def next_time(t: float, t_last: float) -> float:
+    """A pushed sample's time ``t`` as a float, checked to be finite and after ``t_last``.
+
+    Raises
+    ------
+    InputDataError
+        When it is not.
+    """
+    t = float(t)
+    if not math.isfinite(t) or t <= t_last:
+        raise InputDataError(
+            f"trajectory sample t = {t!r} s: times must be finite and increase"
+            f" (previous {t_last} s)"
+        )
+    return t
+
+
+def run_frames(
+    detector: Detector, samples: Iterable[TrajectorySample], columns: tuple[str, ...]
+) -> tuple[list[NDArray[np.float64]], NDArray[np.int64], list[AnomalyEvent]]:
+    """Push every sample through ``detector`` and flush: the body of a detector's ``run``.
+
+    Returns one array per `DetectorFrame` field named in ``columns`` (in that order) with
+    its value at every frame, the frames' `SuppressionReason` bits, and every event.
+    """
+    pick = attrgetter(*columns)
+    rows: list[tuple[float, ...]] = []
+    suppressed: list[int] = []
+    events: list[AnomalyEvent] = []
+    for sample in samples:
+        events.extend(detector.push(sample))
+        f = detector.frame
+        assert f is not None
+        rows.append(pick(f))
+        suppressed.append(int(f.suppressed))
+    events.extend(detector.flush())
+    table = np.array(rows, dtype=np.float64).reshape(-1, len(columns))
+    return (
+        [table[:, i].copy() for i in range(len(columns))],
+        np.array(suppressed, dtype=np.int64),
+        events,
+    )

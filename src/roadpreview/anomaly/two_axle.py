@@ -56,12 +56,18 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, signal
 
-from roadpreview.anomaly.base import AnomalyEvent, DetectorFrame, TrajectorySample
+from roadpreview.anomaly.base import (
+    AnomalyEvent,
+    DetectorFrame,
+    LastFrame,
+    TrajectorySample,
+    next_time,
+    run_frames,
+)
 from roadpreview.anomaly.config import TwoAxleConfig
 from roadpreview.anomaly.response import TemplateBank
 from roadpreview.anomaly.suppression import SuppressionTracker
 from roadpreview.configtools import check_ranges
-from roadpreview.errors import InputDataError
 from roadpreview.types import FusionMode, Side, SuppressionReason
 
 FloatArray = NDArray[np.float64]
@@ -326,7 +332,7 @@ class _Fit:
     innovation: FloatArray = field(default_factory=lambda: np.full(2, np.nan))  #: newest, px
 
 
-class TwoAxleDetector:
+class TwoAxleDetector(LastFrame):
     """Streaming two-axle CFAR detector (module docstring). Push in time order."""
 
     def __init__(self, config: TwoAxleConfig | None = None) -> None:
@@ -378,11 +384,6 @@ class TwoAxleDetector:
         return _ExcursionPicker(self.config.peak_window_s)
 
     @property
-    def frame(self) -> DetectorFrame | None:
-        """The output for the last pushed sample (None before the first)."""
-        return self._frame
-
-    @property
     def background_m(self) -> FloatArray:
         """The background std of each amplitude at the last scored frame (channel heave /
         roll, duration), m (NaN before the first)."""
@@ -391,13 +392,7 @@ class TwoAxleDetector:
     # -- per frame -----------------------------------------------------------------------
     def push(self, sample: TrajectorySample) -> list[AnomalyEvent]:
         """Take the next frame; return the events confirmed at it (suppressed ones included)."""
-        t = float(sample.t)
-        if not math.isfinite(t) or t <= self._t_last:
-            raise InputDataError(
-                f"trajectory sample t = {t!r} s: times must be finite and increase"
-                f" (previous {self._t_last} s)"
-            )
-        self._t_last = t
+        t = self._t_last = next_time(sample.t, self._t_last)
         self._ring.push(self._row(sample))
         suppressed = self._suppression.push(sample)
         fit = self._fit(t, sample)
@@ -997,23 +992,8 @@ class TwoAxleDetector:
 
     def run(self, samples: Iterable[TrajectorySample]) -> TwoAxleRun:
         """Push every sample, flush, and return per-frame arrays and all events."""
-        rows: list[tuple[float, ...]] = []
-        events: list[AnomalyEvent] = []
-        for sample in samples:
-            events.extend(self.push(sample))
-            f = self._frame
-            assert f is not None
-            rows.append(
-                (f.t, f.score, f.t_score, f.height_m, f.background_m, float(int(f.suppressed)))
-            )
-        events.extend(self.flush())
-        table = np.array(rows, dtype=np.float64).reshape(-1, 6)
-        return TwoAxleRun(
-            t=table[:, 0].copy(),
-            score=table[:, 1].copy(),
-            t_score=table[:, 2].copy(),
-            height_m=table[:, 3].copy(),
-            background_m=table[:, 4].copy(),
-            suppressed=table[:, 5].astype(np.int64),
-            events=events,
+        columns, suppressed, events = run_frames(
+            self, samples, ("t", "score", "t_score", "height_m", "background_m")
         )
+        t, score, t_score, height_m, background_m = columns
+        return TwoAxleRun(t, score, t_score, height_m, background_m, suppressed, events)

@@ -24,13 +24,19 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from roadpreview.anomaly.base import AnomalyEvent, DetectorFrame, TrajectorySample
+from roadpreview.anomaly.base import (
+    AnomalyEvent,
+    DetectorFrame,
+    LastFrame,
+    TrajectorySample,
+    next_time,
+    run_frames,
+)
 from roadpreview.anomaly.config import DetectorConfig
 from roadpreview.anomaly.nms import OnsetPicker, PeakPicker
 from roadpreview.anomaly.running import WindowedMoments
 from roadpreview.anomaly.suppression import SuppressionTracker
 from roadpreview.configtools import check_ranges
-from roadpreview.errors import InputDataError
 from roadpreview.types import FusionMode, Side, SuppressionReason
 
 FloatArray = NDArray[np.float64]
@@ -67,7 +73,7 @@ class DetectorRun:
         return [e for e in self.events if not e.suppressed]
 
 
-class WindowedStdDetector:
+class WindowedStdDetector(LastFrame):
     """Streaming windowed-std detector with NMS, sides and suppression (module docstring).
 
     ``push`` costs O(1) per frame (plus O(window) when a new peak candidate
@@ -97,11 +103,6 @@ class WindowedStdDetector:
         if self.config.emit == "onset":
             return OnsetPicker(self.config.nms_window_s)
         return PeakPicker(self.config.nms_window_s)
-
-    @property
-    def frame(self) -> DetectorFrame | None:
-        """The output for the last pushed sample (None before the first)."""
-        return self._frame
 
     @property
     def moments(self) -> WindowedMoments:
@@ -182,13 +183,7 @@ class WindowedStdDetector:
 
     def push(self, sample: TrajectorySample) -> list[AnomalyEvent]:
         """Take the next frame; return the events confirmed at it (suppressed ones included)."""
-        t = float(sample.t)
-        if not math.isfinite(t) or t <= self._t_last:
-            raise InputDataError(
-                f"trajectory sample t = {t!r} s: times must be finite and increase"
-                f" (previous {self._t_last} s)"
-            )
-        self._t_last = t
+        t = self._t_last = next_time(sample.t, self._t_last)
         if sample.valid:
             x = [sample.y_c, sample.y_c_left, sample.y_c_right]
             x = [float(v) if math.isfinite(v) else math.nan for v in x]
@@ -245,21 +240,8 @@ class WindowedStdDetector:
 
     def run(self, samples: Iterable[TrajectorySample]) -> DetectorRun:
         """Push every sample, flush, and return per-frame arrays and all events."""
-        rows: list[tuple[float, float, float, float, float, int]] = []
-        events: list[AnomalyEvent] = []
-        for sample in samples:
-            events.extend(self.push(sample))
-            f = self._frame
-            assert f is not None
-            rows.append((f.t, f.s, f.s_left, f.s_right, f.threshold_px, int(f.suppressed)))
-        events.extend(self.flush())
-        table = np.array(rows, dtype=np.float64).reshape(-1, 6)
-        return DetectorRun(
-            t=table[:, 0].copy(),
-            s=table[:, 1].copy(),
-            s_left=table[:, 2].copy(),
-            s_right=table[:, 3].copy(),
-            threshold_px=table[:, 4].copy(),
-            suppressed=table[:, 5].astype(np.int64),
-            events=events,
+        columns, suppressed, events = run_frames(
+            self, samples, ("t", "s", "s_left", "s_right", "threshold_px")
         )
+        t, s, s_left, s_right, threshold_px = columns
+        return DetectorRun(t, s, s_left, s_right, threshold_px, suppressed, events)

@@ -31,17 +31,6 @@ TARGETS = {"kalman": "≥ 100k samples/s", "factor-graph": "≥ 20x real time"}
 _Events = list[tuple[float, int, tuple[float, ...]]]
 
 
-def _pitch_integral(
-    t: NDArray[np.float64],
-    amp: NDArray[np.float64],
-    freq: NDArray[np.float64],
-    phase: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    w = 2 * np.pi * freq
-    out: NDArray[np.float64] = np.sum(-amp / w * np.cos(w * t[:, None] + phase), axis=1)
-    return out
-
-
 def _pitch(
     t: NDArray[np.float64],
     amp: NDArray[np.float64],

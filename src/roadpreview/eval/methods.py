@@ -70,20 +70,26 @@ METHODS: dict[str, MethodSpec] = {
 REFERENCE_METHOD = "fused-kalman"
 
 
+def _options(
+    own: Mapping[str, Any] | None, same_component: bool, base: Mapping[str, Any]
+) -> dict[str, Any]:
+    """A component's options for a method: its ``own`` when it has some, else the base
+    configuration's when the base names the same component, else none."""
+    if own is not None:
+        return dict(own)
+    if same_component:
+        return dict(base)
+    return {}
+
+
 def method_config(base: PipelineConfig, spec: MethodSpec) -> PipelineConfig:
     """``base`` with the method's estimator and back end (and their options)."""
-    if spec.pitch_options is not None:
-        pitch_options = dict(spec.pitch_options)
-    elif spec.estimator == base.pitch.estimator:
-        pitch_options = dict(base.pitch.options)
-    else:
-        pitch_options = {}
-    if spec.fusion_options is not None:
-        fusion_options = dict(spec.fusion_options)
-    elif spec.backend == base.fusion.backend:
-        fusion_options = dict(base.fusion.options)
-    else:
-        fusion_options = {}
+    pitch_options = _options(
+        spec.pitch_options, spec.estimator == base.pitch.estimator, base.pitch.options
+    )
+    fusion_options = _options(
+        spec.fusion_options, spec.backend == base.fusion.backend, base.fusion.options
+    )
     cfg = replace(
         base,
         pitch=replace(base.pitch, estimator=spec.estimator, options=pitch_options),

@@ -30,7 +30,7 @@ from dataclasses import dataclass, fields
 from typing import Protocol, runtime_checkable
 
 from roadpreview.fusion.gyro import RejectCounter
-from roadpreview.pitch.base import PitchEstimate
+from roadpreview.pitch.base import PitchEstimate, PitchInDegrees
 from roadpreview.types import FusionMode
 
 
@@ -103,7 +103,7 @@ _VISUAL_SETTERS = _slot_setters(VisualPitch)
 
 
 @dataclass(frozen=True, slots=True, init=False)
-class FusedPitch:
+class FusedPitch(PitchInDegrees):
     """The fused camera pitch at a frame time.
 
     ``phi`` (rad) is relative to the attitude at the first frame; ``std`` its
@@ -145,15 +145,6 @@ class FusedPitch:
         set_off(self, time_offset)
         set_conf(self, time_offset_confidence)
         set_bias_std(self, bias_std)
-
-    @property
-    def phi_deg(self) -> float:
-        """The pitch in degrees (for display and reports)."""
-        return math.degrees(self.phi)
-
-    @property
-    def std_deg(self) -> float:
-        return math.degrees(self.std)
 
 
 _FUSED_SETTERS = _slot_setters(FusedPitch)

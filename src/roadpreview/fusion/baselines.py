@@ -28,7 +28,38 @@ class _Clock:
         self.last = t
 
 
-class VisualOnlyPitch:
+class _InputsIgnored:
+    """The inputs a comparison back end does not use: accepted and ignored.
+
+    `VisualOnlyPitch` overrides the visual calls; the gyro's pitch rate goes into the
+    back end's ``gyro`` history when it has one (`ImuOnlyPitch`); `ZeroPitchFusion` uses
+    nothing. Roll and yaw rates are not used by any of them.
+    """
+
+    #: where pushed pitch rates go (None: the gyro is ignored)
+    gyro: GyroHistory | None = None
+
+    def push_gyro(
+        self,
+        t: float,
+        pitch_rate: float,
+        *,
+        roll_rate: float | None = None,
+        yaw_rate: float | None = None,
+    ) -> bool:
+        """The pitch rate into ``gyro`` (False: rejected there, logged); without a gyro
+        history accepted and ignored (True)."""
+        gyro = self.gyro
+        return True if gyro is None else gyro.push(t, pitch_rate)
+
+    def push_visual(self, meas: VisualPitch) -> None:
+        """Ignored."""
+
+    def push_vision_failure(self, t: float, reason: str) -> None:
+        """Ignored."""
+
+
+class VisualOnlyPitch(_InputsIgnored):
     """The paper's compensation: the visual pitch alone, chained over key frames.
 
     phi(t) = phi(t_ref) + dphi for the frame's measurement; a key frame the
@@ -53,16 +84,6 @@ class VisualOnlyPitch:
         self._var = 0.0
         self._bad = 0
         self._started = False
-
-    def push_gyro(
-        self,
-        t: float,
-        pitch_rate: float,
-        *,
-        roll_rate: float | None = None,
-        yaw_rate: float | None = None,
-    ) -> bool:
-        return True
 
     def push_visual(self, meas: VisualPitch) -> None:
         v = self.config.vision
@@ -116,7 +137,7 @@ class VisualOnlyPitch:
         )
 
 
-class ImuOnlyPitch:
+class ImuOnlyPitch(_InputsIgnored):
     """The integrated gyro: phi(t) = ∫ (ω - b) dt from the first frame, b fixed (default 0).
 
     The paper's IMU comparison, which drifts with the uncorrected bias. Gyro
@@ -126,6 +147,7 @@ class ImuOnlyPitch:
     """
 
     name = "imu-only"
+    gyro: GyroHistory  #: always one here
 
     def __init__(self, config: ImuOnlyConfig | None = None) -> None:
         self.config = config or ImuOnlyConfig()
@@ -140,22 +162,6 @@ class ImuOnlyPitch:
         self._phi_c = 0.0
         self._var_c = 0.0
         self._dm_c = 0.0  # measured time since the start (for the bias uncertainty)
-
-    def push_gyro(
-        self,
-        t: float,
-        pitch_rate: float,
-        *,
-        roll_rate: float | None = None,
-        yaw_rate: float | None = None,
-    ) -> bool:
-        return self.gyro.push(t, pitch_rate)
-
-    def push_visual(self, meas: VisualPitch) -> None:
-        """Ignored: this back end uses the gyro alone."""
-
-    def push_vision_failure(self, t: float, reason: str) -> None:
-        """Ignored."""
 
     def estimate(self, t: float) -> FusedPitch:
         self._clock.check(t)
@@ -192,7 +198,7 @@ class ImuOnlyPitch:
         )
 
 
-class ZeroPitchFusion:
+class ZeroPitchFusion(_InputsIgnored):
     """The paper's other baseline: pitch 0 (y_c = y), std infinite, mode DEGRADED."""
 
     name = "none"
@@ -202,22 +208,6 @@ class ZeroPitchFusion:
 
     def reset(self) -> None:
         self._clock = _Clock()
-
-    def push_gyro(
-        self,
-        t: float,
-        pitch_rate: float,
-        *,
-        roll_rate: float | None = None,
-        yaw_rate: float | None = None,
-    ) -> bool:
-        return True
-
-    def push_visual(self, meas: VisualPitch) -> None:
-        """Ignored."""
-
-    def push_vision_failure(self, t: float, reason: str) -> None:
-        """Ignored."""
 
     def estimate(self, t: float) -> FusedPitch:
         self._clock.check(t)

@@ -20,8 +20,30 @@ from numpy.typing import ArrayLike, NDArray
 from roadpreview.errors import InputDataError
 
 
+class PitchInDegrees:
+    """``phi_deg`` and ``std_deg`` of a result with a pitch ``phi`` and its ``std`` (rad).
+
+    Shared by `PitchEstimate` and `roadpreview.fusion.FusedPitch`; slot-free, so a
+    slotted dataclass that inherits it stays without a ``__dict__``.
+    """
+
+    __slots__ = ()
+
+    phi: float
+    std: float
+
+    @property
+    def phi_deg(self) -> float:
+        """The pitch in degrees (for display and reports)."""
+        return math.degrees(self.phi)
+
+    @property
+    def std_deg(self) -> float:
+        return math.degrees(self.std)
+
+
 @dataclass(frozen=True)
-class PitchEstimate:
+class PitchEstimate(PitchInDegrees):
     """Result of one pitch fit.
 
     ``phi`` is the pitch of the current frame relative to the reference frame
@@ -45,15 +67,6 @@ class PitchEstimate:
 
     def __bool__(self) -> bool:
         return self.converged and not self.reason and math.isfinite(self.phi)
-
-    @property
-    def phi_deg(self) -> float:
-        """The pitch in degrees (for display and reports)."""
-        return math.degrees(self.phi)
-
-    @property
-    def std_deg(self) -> float:
-        return math.degrees(self.std)
 
     @classmethod
     def failed(
