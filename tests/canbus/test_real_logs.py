@@ -28,7 +28,8 @@ SPEED_HZ = 41.3
 
 
 def _rate(t: np.ndarray) -> float:
-    return (len(t) - 1) / (t[-1] - t[0])
+    rate: float = (len(t) - 1) / (t[-1] - t[0])
+    return rate
 
 
 @pytest.fixture(scope="module")

@@ -60,7 +60,8 @@ def y_errors(outs: list[FrameVision], rec: Recording, model: str) -> np.ndarray:
     assert len({o.lead.track_id for o in outs}) == 1
     d = y - truth
     if model == "constant":
-        return d - d.mean()
+        centred: np.ndarray = d - d.mean()
+        return centred
     A = np.c_[np.ones_like(d), 1.0 / rec.truth["lead_distance_m"]]
     coef, *_ = np.linalg.lstsq(A, d, rcond=None)
     return np.asarray(d - A @ coef)
