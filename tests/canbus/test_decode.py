@@ -27,7 +27,14 @@ from roadpreview.canbus.decode import toyota_checksum_ok
 from roadpreview.canbus.mapping import parse_mapping, replace_quantity
 from roadpreview.errors import ConfigError
 from roadpreview.sim.canlog import imu_to_messages, speed_to_messages
-from roadpreview.sim.imu import DEG, ImuConfig, SpeedSensorConfig, simulate_imu, simulate_speed
+from roadpreview.sim.imu import (
+    DEG,
+    ImuConfig,
+    ImuSamples,
+    SpeedSensorConfig,
+    simulate_imu,
+    simulate_speed,
+)
 from roadpreview.types import ImuSample, SpeedSample
 
 FILES = Path(__file__).resolve().parents[1] / "files"
@@ -39,7 +46,7 @@ def db() -> Database:
     return database
 
 
-def _sim_imu(seconds: float = 2.0):  # type: ignore[no-untyped-def]
+def _sim_imu(seconds: float = 2.0) -> ImuSamples:
     t = np.arange(0.0, seconds, 0.001)
     n = len(t)
     omega = np.column_stack([0.2 * np.sin(3 * t), 0.3 * np.sin(5 * t), 0.5 * np.cos(t)])
