@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import pytest
+
+if TYPE_CHECKING:
+    from roadpreview.sim.recording import Recording
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
@@ -37,7 +42,7 @@ def yolox_model() -> Path:
 
 
 @pytest.fixture(scope="session")
-def make_recording(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+def make_recording(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Recording]:
     """Factory for simulated recordings, cached per session by their parameters.
 
     ``make_recording("demo", seed=0, duration_s=6.0, width=640, height=360, masks=False,
@@ -67,8 +72,9 @@ def make_recording(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no
                tuple(sorted(scenario_overrides.items())))
         if key not in cache:
             cfg = drive_config(preset, seed, duration_s=duration_s, width=width, height=height)
-            cfg = replace(cfg, output=replace(cfg.output, masks=masks, video=video),
-                          **scenario_overrides)  # type: ignore[arg-type]
+            # the overrides are DriveConfig fields of any type: checked by replace at run time
+            overrides = cast("dict[str, Any]", scenario_overrides)
+            cfg = replace(cfg, output=replace(cfg.output, masks=masks, video=video), **overrides)
             folder = root / f"rec{len(cache):03d}_{preset}_{seed}"
             write_recording(cfg, folder)
             cache[key] = Recording.open(folder)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from roadpreview.anomaly.confirm import ConfirmConfig, EgoConfirmer
-from roadpreview.types import Confirmation, Side
+from roadpreview.types import Confirmation, ConfirmationResult, Side
 
 
 def _drive(
@@ -19,11 +19,11 @@ def _drive(
     duration_s: float = 30.0,
     imu: bool = True,
     seed: int = 0,
-) -> list:
+) -> list[ConfirmationResult]:
     """Frames at 30 fps, the ego's per-frame acceleration peak: background ~0.3 m/s², a
     4 m/s² jolt over 0.1 s at each time in ``spikes``."""
     rng = np.random.default_rng(seed)
-    out = []
+    out: list[ConfirmationResult] = []
     for t in np.arange(0.0, duration_s, 1 / 30):
         peak = abs(rng.normal(0.0, 0.3))
         if any(0.0 <= t - s < 0.1 for s in spikes):

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from roadpreview.anomaly import TrajectorySample, TwoAxleConfig
+from roadpreview.anomaly import AnomalyEvent, TrajectorySample, TwoAxleConfig
 from roadpreview.anomaly.response import NominalVehicle, TemplateBank
 from roadpreview.anomaly.two_axle import TwoAxleDetector
 from roadpreview.types import Side
@@ -79,9 +79,9 @@ def _trajectory(
 
 def _run(
     samples: list[TrajectorySample], cfg: TwoAxleConfig | None = None
-) -> tuple[TwoAxleDetector, list]:
+) -> tuple[TwoAxleDetector, list[AnomalyEvent]]:
     det = TwoAxleDetector(cfg)
-    events = []
+    events: list[AnomalyEvent] = []
     for s in samples:
         events += det.push(s)
     events += det.flush()
@@ -232,18 +232,14 @@ def test_bad_input_gives_no_alert_and_no_crash() -> None:
     bad = []
     for i, s in enumerate(base):
         if 100 <= i < 130:  # NaN halves
-            s = TrajectorySample(**{**_fields(s), "y_c_left": math.nan, "y_c_right": math.nan})
+            s = replace(s, y_c_left=math.nan, y_c_right=math.nan)
         elif 200 <= i < 260:  # the lead lost for 2 s
-            s = TrajectorySample(**{**_fields(s), "valid": False, "y_c": math.nan})
+            s = replace(s, valid=False, y_c=math.nan)
         elif 400 <= i < 500:  # standing still
-            s = TrajectorySample(**{**_fields(s), "ego_speed_mps": 0.0})
+            s = replace(s, ego_speed_mps=0.0)
         elif 600 <= i < 700:  # the gap closing fast, a distance glitch
             d = 15.0 - 0.5 * (i - 600) if i % 7 else math.nan
-            s = TrajectorySample(**{**_fields(s), "lead_distance_m": d})
+            s = replace(s, lead_distance_m=d)
         bad.append(s)
     _, events = _run(bad)
     assert events == []
-
-
-def _fields(s: TrajectorySample) -> dict[str, object]:
-    return {f: getattr(s, f) for f in s.__slots__}  # type: ignore[attr-defined]

@@ -10,6 +10,7 @@ import cantools
 import numpy as np
 import pytest
 from cantools.database.can import Database
+from cantools.typechecking import DecodeResultType, SignalDictType
 
 from roadpreview.canbus.dbc import (
     E2E_COUNTER_MODULUS,
@@ -28,6 +29,7 @@ from roadpreview.canbus.dbc import (
     encode_protected,
     load_database,
 )
+from roadpreview.canbus.samples import ImuMeasurements
 from roadpreview.errors import InputDataError
 from roadpreview.sim.canlog import (
     DEFAULT_T0_UNIX_S,
@@ -39,7 +41,6 @@ from roadpreview.sim.imu import (
     DEG,
     KMH,
     ImuConfig,
-    ImuMeasurements,
     ImuSamples,
     SpeedSamples,
     SpeedSensorConfig,
@@ -276,18 +277,24 @@ def test_a_corrupted_byte_or_wrong_message_fails_the_check(db: Database) -> None
 # --- the simulator's frames -----------------------------------------------------------------
 
 
-def _decode_all(db: Database, frames: list[can.Message], name: str) -> list[dict[str, object]]:
+def _signals(decoded: DecodeResultType) -> SignalDictType:
+    """cantools decodes a plain (non-container) message to a signal dict: narrow to it."""
+    assert isinstance(decoded, dict)
+    return decoded
+
+
+def _decode_all(db: Database, frames: list[can.Message], name: str) -> list[SignalDictType]:
     msg = db.get_message_by_name(name)
     out = []
     for f in frames:
         if f.arbitration_id != msg.frame_id:
             continue
         assert check_protected(msg, f.data), f"{name}: bad CRC"
-        out.append(msg.decode(f.data, decode_choices=False))
+        out.append(_signals(msg.decode(bytes(f.data), decode_choices=False)))
     return out
 
 
-def _assert_counters(decoded: list[dict[str, object]], signal: str) -> None:
+def _assert_counters(decoded: list[SignalDictType], signal: str) -> None:
     counters = np.array([d[signal] for d in decoded])
     assert counters.max() == E2E_COUNTER_MODULUS - 1
     np.testing.assert_array_equal(np.diff(counters) % E2E_COUNTER_MODULUS, 1)
@@ -335,10 +342,10 @@ def test_speed_frames_decode_to_the_samples(db: Database, speed_samples: SpeedSa
 
 def test_out_of_range_values_are_clipped_and_nan_is_signal_not_available(db: Database) -> None:
     m = db.get_message_by_name(IMU_RATES)
-    t = np.arange(3) * 0.01
+    t = np.arange(3, dtype=np.float64) * 0.01
     gyro = np.array([[400 * DEG, 0, 0], [0, np.nan, 0], [-400 * DEG, 0, 0]])
     frames = imu_to_messages(ImuMeasurements(t, gyro, np.zeros((3, 3))), db)
-    decoded = [m.decode(f.data) for f in frames if f.arbitration_id == m.frame_id]
+    decoded = [_signals(m.decode(bytes(f.data))) for f in frames if f.arbitration_id == m.frame_id]
     assert decoded[0]["RollRate"] == pytest.approx(163.835)
     assert decoded[2]["RollRate"] == pytest.approx(-163.835)
     assert str(decoded[1]["PitchRate"]) == "SignalNotAvailable"

@@ -27,7 +27,14 @@ from roadpreview.canbus.decode import toyota_checksum_ok
 from roadpreview.canbus.mapping import parse_mapping, replace_quantity
 from roadpreview.errors import ConfigError
 from roadpreview.sim.canlog import imu_to_messages, speed_to_messages
-from roadpreview.sim.imu import DEG, ImuConfig, SpeedSensorConfig, simulate_imu, simulate_speed
+from roadpreview.sim.imu import (
+    DEG,
+    ImuConfig,
+    ImuSamples,
+    SpeedSensorConfig,
+    simulate_imu,
+    simulate_speed,
+)
 from roadpreview.types import ImuSample, SpeedSample
 
 FILES = Path(__file__).resolve().parents[1] / "files"
@@ -35,10 +42,11 @@ FILES = Path(__file__).resolve().parents[1] / "files"
 
 @pytest.fixture(scope="module")
 def db() -> Database:
-    return load_database()
+    database: Database = load_database()  # roadpreview.canbus exports lazily: Any to mypy
+    return database
 
 
-def _sim_imu(seconds: float = 2.0):  # type: ignore[no-untyped-def]
+def _sim_imu(seconds: float = 2.0) -> ImuSamples:
     t = np.arange(0.0, seconds, 0.001)
     n = len(t)
     omega = np.column_stack([0.2 * np.sin(3 * t), 0.3 * np.sin(5 * t), 0.5 * np.cos(t)])
@@ -192,7 +200,7 @@ def test_every_bad_frame_is_counted_logged_once_and_skipped(
     with caplog.at_level(logging.WARNING, logger="roadpreview.canbus.decode"):
         samples = list(dec.decode_all(stream))
     assert [round(s.t_s, 3) for s in samples] == [0.0, 0.01, 0.02, 0.04, 0.05, 0.07, 0.08, 0.09]
-    assert all(s.rates_rad_s[1] == pytest.approx(2.0 * DEG) for s in samples)  # type: ignore[union-attr]
+    assert all(s.rates_rad_s[1] == pytest.approx(2.0 * DEG) for s in samples)
     assert dec.stats.problems == {
         FrameProblem.UNKNOWN_ID: 1,
         FrameProblem.WRONG_LENGTH: 1,

@@ -217,7 +217,7 @@ def test_an_unknown_detector_fails_when_the_output_is_built(
 def test_a_send_error_is_counted_and_the_sink_goes_on(tmp_path: Path) -> None:
     """A bus that refuses a frame: logged and counted, the next frames still go out."""
 
-    class Flaky(can.BusABC):  # type: ignore[misc]
+    class Flaky(can.BusABC):
         def __init__(self) -> None:
             super().__init__(channel="flaky")
             self.sent: list[can.Message] = []

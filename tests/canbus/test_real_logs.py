@@ -18,8 +18,12 @@ from roadpreview.canbus import (
     split_samples,
     write_can_log,
 )
+from roadpreview.types import ImuSample, SpeedSample
 
 pytestmark = pytest.mark.shared
+
+#: the `decoded` fixture: the decoder and the log's IMU and speed samples
+Decoded = tuple[CanInputDecoder, list[ImuSample], list[SpeedSample]]
 
 #: measured on this log: KINEMATICS (yaw rate, accelerations) 4914 good 8-byte frames in 60 s
 KINEMATICS_HZ = 81.9
@@ -28,18 +32,19 @@ SPEED_HZ = 41.3
 
 
 def _rate(t: np.ndarray) -> float:
-    return (len(t) - 1) / (t[-1] - t[0])
+    rate: float = (len(t) - 1) / (t[-1] - t[0])
+    return rate
 
 
 @pytest.fixture(scope="module")
-def decoded(comma_dir: Path):  # type: ignore[no-untyped-def]
+def decoded(comma_dir: Path) -> Decoded:
     db = load_database(comma_dir / "dbc" / "toyota_new_mc_pt_generated.dbc", strict=False)
     dec = CanInputDecoder(db, load_mapping("toyota_rav4"), db_name="toyota_new_mc_pt_generated")
     imu, speed = split_samples(decode_log(comma_dir / "derived" / "raw_can.candump.log", dec))
     return dec, imu, speed
 
 
-def test_yaw_rate_and_accelerations_at_their_real_rates(decoded) -> None:  # type: ignore[no-untyped-def]
+def test_yaw_rate_and_accelerations_at_their_real_rates(decoded: Decoded) -> None:
     dec, imu, speed = decoded
     t = np.array([s.t_s for s in imu])
     rates = np.array([s.rates_rad_s for s in imu])
@@ -64,7 +69,7 @@ def test_yaw_rate_and_accelerations_at_their_real_rates(decoded) -> None:  # typ
     assert dec.stats.used == len(imu) + len(speed) == 4914 + 2480
 
 
-def test_signs_agree_with_the_recorded_imu(decoded, comma_dir: Path) -> None:  # type: ignore[no-untyped-def]
+def test_signs_agree_with_the_recorded_imu(decoded: Decoded, comma_dir: Path) -> None:
     """The mapping's signs against the phone IMU (axes forward, right, down) of the same drive."""
     _, imu, speed = decoded
     t = np.array([s.t_s for s in imu])

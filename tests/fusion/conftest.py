@@ -28,6 +28,7 @@ visual result and the estimate for it ``latency_s`` after the exposure.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -90,7 +91,7 @@ def open_drive(rec: Recording) -> Drive:
 
 
 @pytest.fixture(scope="session")
-def sim_drive(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+def sim_drive(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Drive]:
     """Factory ``sim_drive(preset, seed=0, duration_s=60, pitch_bias_deg_s=0.5) -> Drive``.
 
     A smartphone-grade IMU as in the preset (its random 0-80 ms clock offset
@@ -210,7 +211,8 @@ def synthetic_drive(
     phase = rng.uniform(0, 2 * np.pi, freq.size)
 
     def pitch(t: np.ndarray) -> np.ndarray:
-        return np.sum(amp * np.sin(2 * np.pi * freq * t[:, None] + phase), axis=1)
+        summed: np.ndarray = np.sum(amp * np.sin(2 * np.pi * freq * t[:, None] + phase), axis=1)
+        return summed
 
     tt = np.arange(1, int(duration_s * 100) + 1) / 100.0
     rate = (pitch(tt) - pitch(tt - 0.01)) * 100.0 + bias_deg_s * DEG
@@ -237,7 +239,7 @@ def synthetic_drive(
 
 
 @pytest.fixture(scope="session")
-def imu_realisations():  # type: ignore[no-untyped-def]
+def imu_realisations() -> Callable[..., list[Drive]]:
     """`make_imu_realisations` (motions cached per session)."""
     return make_imu_realisations
 
@@ -301,7 +303,8 @@ class Replay:
     offset_conf: np.ndarray
 
     def error_deg(self, drive: Drive) -> np.ndarray:
-        return np.degrees(self.phi - drive.pitch)
+        err: np.ndarray = np.degrees(self.phi - drive.pitch)
+        return err
 
 
 def replay(
@@ -370,11 +373,11 @@ def segments(flag: np.ndarray) -> list[tuple[int, int]]:
 class FusionTestKit:
     """The helpers above, handed to tests as one fixture."""
 
-    front_end: Any = front_end_measurements
-    replay: Any = replay
-    synthetic: Any = synthetic_drive
-    windowed_rms_deg: Any = windowed_rms_deg
-    segments: Any = segments
+    front_end: Callable[..., FrontEnd] = front_end_measurements
+    replay: Callable[..., Replay] = replay
+    synthetic: Callable[..., Drive] = synthetic_drive
+    windowed_rms_deg: Callable[..., np.ndarray] = windowed_rms_deg
+    segments: Callable[[np.ndarray], list[tuple[int, int]]] = segments
     FUSED: int = int(FusionMode.FUSED)
     IMU_ONLY: int = int(FusionMode.IMU_ONLY)
     VISUAL_ONLY: int = int(FusionMode.VISUAL_ONLY)

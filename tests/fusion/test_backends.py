@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -10,7 +11,12 @@ import pytest
 from roadpreview.errors import ConfigError
 from roadpreview.fusion import BACKENDS, PitchFusion, make_fusion
 from roadpreview.fusion.config import FactorGraphConfig
+from roadpreview.fusion.streaming import StreamingPitchFusion
 from roadpreview.types import FusionMode
+
+if TYPE_CHECKING:  # conftest is not importable at run time (--import-mode=importlib)
+    from tests.fusion.conftest import Drive, FrontEnd, FusionTestKit
+
 
 DEG = math.pi / 180.0
 
@@ -38,9 +44,10 @@ def test_unknown_back_end_and_options_are_config_errors() -> None:
 
 def test_options_reach_the_config() -> None:
     f = make_fusion("factor-graph", lag_s=3.0, gyro={"timeout_s": 0.5})
-    assert isinstance(f.config, FactorGraphConfig)  # type: ignore[attr-defined]
-    assert f.config.lag_s == 3.0  # type: ignore[attr-defined]
-    assert f.config.gyro.timeout_s == 0.5  # type: ignore[attr-defined]
+    assert isinstance(f, StreamingPitchFusion)  # what make_fusion builds for this back end
+    assert isinstance(f.config, FactorGraphConfig)
+    assert f.config.lag_s == 3.0
+    assert f.config.gyro.timeout_s == 0.5
 
 
 def test_none_is_the_uncompensated_baseline() -> None:
@@ -52,7 +59,7 @@ def test_none_is_the_uncompensated_baseline() -> None:
     assert math.isinf(out.std)
 
 
-def test_imu_only_integrates_the_gyro_with_its_bias(kit) -> None:  # type: ignore[no-untyped-def]
+def test_imu_only_integrates_the_gyro_with_its_bias(kit: FusionTestKit) -> None:
     """The paper's IMU comparison: uncorrected, it drifts at the bias rate; with the bias
     given, it follows the pitch."""
     d = kit.synthetic(10.0, seed=21, offset_s=0.0, gyro_noise_deg_s=0.0)
@@ -65,7 +72,7 @@ def test_imu_only_integrates_the_gyro_with_its_bias(kit) -> None:  # type: ignor
     assert np.abs(fixed.error_deg(d)).max() < 0.003
 
 
-def test_visual_only_chains_key_frames(kit) -> None:  # type: ignore[no-untyped-def]
+def test_visual_only_chains_key_frames(kit: FusionTestKit) -> None:
     """The paper's compensation: noiseless vision is the truth; lost vision is DEGRADED."""
     d = kit.synthetic(8.0, seed=22, loss=((4.0, 5.0),))
     r = kit.replay(make_fusion("visual-only"), d, kit.front_end(d, std_deg=1e-9))
@@ -76,12 +83,14 @@ def test_visual_only_chains_key_frames(kit) -> None:  # type: ignore[no-untyped-
 
 
 @pytest.fixture(scope="module")
-def short_drive(kit):  # type: ignore[no-untyped-def]
+def short_drive(kit: FusionTestKit) -> tuple[Drive, FrontEnd]:
     d = kit.synthetic(12.0, seed=23, loss=((6.0, 8.0),))
     return d, kit.front_end(d)
 
 
-def test_factor_graph_custom_factor_equals_linear_factor(kit, short_drive) -> None:  # type: ignore[no-untyped-def]
+def test_factor_graph_custom_factor_equals_linear_factor(
+    kit: FusionTestKit, short_drive: tuple[Drive, FrontEnd]
+) -> None:
     """The gyro factor as a Python CustomFactor or as gtsam's C++ linear factor: same result."""
     d, fe = short_drive
     a = kit.replay(make_fusion("factor-graph", gyro_factor="custom"), d, fe)
@@ -89,7 +98,9 @@ def test_factor_graph_custom_factor_equals_linear_factor(kit, short_drive) -> No
     assert np.degrees(np.abs(a.phi - b.phi)).max() < 1e-6
 
 
-def test_batch_smoother_and_bounded_rebuild_agree(kit, short_drive) -> None:  # type: ignore[no-untyped-def]
+def test_batch_smoother_and_bounded_rebuild_agree(
+    kit: FusionTestKit, short_drive: tuple[Drive, FrontEnd]
+) -> None:
     """The fallbacks for the incremental smoother's upstream trouble: the batch smoother,
     and re-creating the smoother from its marginals every second, give the same pitch."""
     d, fe = short_drive

@@ -57,8 +57,8 @@ def test_out_of_order_samples_give_the_same_integral(caplog: pytest.LogCaptureFi
         order[i : i + 4] = rng.permutation(order[i : i + 4])
     g = GyroHistory(GyroConfig(rate_hz=100.0))
     with caplog.at_level(logging.WARNING):
-        for i in order:
-            assert g.push(float(t[i]), float(w[i]))
+        for j in order:
+            assert g.push(float(t[j]), float(w[j]))
     assert g.rejects.counts.get("reordered", 0) > 0
     for a, b in [(0.1, 2.9), (0.555, 1.234)]:
         assert g.motion(a, b).dG == pytest.approx(ref.motion(a, b).dG, abs=1e-15)
@@ -164,10 +164,10 @@ def test_kept_query_results_equal_fresh_searches() -> None:
     arrivals = sorted((k + (rng.integers(6, 10) if late[i] else 0), i) for k, i in enumerate(order))
     g = GyroHistory(GyroConfig(rate_hz=100.0, history_s=12.0))
     frame, key, n_checked = 0.5, 0.5, 0
-    for _, i in arrivals:
-        if drop[i]:
+    for _, j in arrivals:
+        if drop[j]:
             continue
-        g.push(float(t[i]), float(w[i]))
+        g.push(float(t[j]), float(w[j]))
         newest = g.newest
         assert newest is not None
         while frame + 1 / 30 < newest - 0.05:  # frames as the fusion queries them

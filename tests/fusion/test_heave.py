@@ -38,7 +38,8 @@ def _interval_means(fine_t: Array, x: Array, t: Array) -> Array:
     """Means of ``x`` over the sample interval before each ``t`` (an IMU's averaging)."""
     dt = fine_t[1] - fine_t[0]
     cum = np.concatenate([[0.0], np.cumsum(x[:-1] * dt)])
-    return (np.interp(t, fine_t, cum) - np.interp(t - 1 / RATE_HZ, fine_t, cum)) * RATE_HZ
+    means: Array = (np.interp(t, fine_t, cum) - np.interp(t - 1 / RATE_HZ, fine_t, cum)) * RATE_HZ
+    return means
 
 
 def _windowed_std(x: Array, n: int = 30) -> Array:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -13,6 +14,11 @@ from roadpreview.fusion import VisualPitch, make_fusion
 from roadpreview.fusion.config import AlignmentConfig, GyroConfig, KalmanConfig
 from roadpreview.fusion.gyro import GyroHistory
 from roadpreview.fusion.kalman import GyroPitchKalmanFilter, kalman_fusion
+from roadpreview.fusion.streaming import StreamingPitchFusion
+
+if TYPE_CHECKING:  # conftest is not importable at run time (--import-mode=importlib)
+    from tests.fusion.conftest import FusionTestKit
+
 
 DEG = math.pi / 180.0
 
@@ -190,7 +196,7 @@ def test_arrays_assigned_to_the_filterpy_filter_are_taken_up() -> None:
     assert b.kf.x[0, 0] != 0.01
 
 
-def test_a_copied_filter_runs_on_as_the_original(kit) -> None:  # type: ignore[no-untyped-def]
+def test_a_copied_filter_runs_on_as_the_original(kit: FusionTestKit) -> None:
     """Deep copies and pickles keep the filter's storage and remake its views: a copy taken
     mid-drive continues exactly as the original."""
     import copy
@@ -214,7 +220,7 @@ def test_a_copied_filter_runs_on_as_the_original(kit) -> None:  # type: ignore[n
         assert np.array_equal(r.std, runs[0].std)
 
 
-def test_relative_measurements_recover_the_pitch_exactly(kit) -> None:  # type: ignore[no-untyped-def]
+def test_relative_measurements_recover_the_pitch_exactly(kit: FusionTestKit) -> None:
     """Noiseless gyro and vision against key frames renewed every 0.5 s: the output is the
     truth to within what one gyro sample resolves between frame times (a relative
     measurement used as absolute, or a key frame re-anchored wrongly, would be off by the
@@ -227,7 +233,7 @@ def test_relative_measurements_recover_the_pitch_exactly(kit) -> None:  # type: 
     assert np.degrees(np.ptp(d.pitch)) > 0.5
 
 
-def test_renewing_the_key_frame_injects_no_step(kit) -> None:  # type: ignore[no-untyped-def]
+def test_renewing_the_key_frame_injects_no_step(kit: FusionTestKit) -> None:
     """Noisy vision, key frames every 2 s: the frame-to-frame error change at a key renewal
     is no larger than anywhere else."""
     d = kit.synthetic(20.0, seed=3)
@@ -243,7 +249,7 @@ def test_renewing_the_key_frame_injects_no_step(kit) -> None:  # type: ignore[no
     assert derr[renewal - 1].max() < 3.0 * np.percentile(derr[others], 99)
 
 
-def test_an_outlier_is_gated(kit) -> None:  # type: ignore[no-untyped-def]
+def test_an_outlier_is_gated(kit: FusionTestKit) -> None:
     """A gross visual error (+0.5 deg on one frame) is rejected by the Mahalanobis gate."""
     d = kit.synthetic(12.0, seed=4)
     i = 300
@@ -252,6 +258,7 @@ def test_an_outlier_is_gated(kit) -> None:  # type: ignore[no-untyped-def]
         "alignment": {"enabled": False, "initial_offset_s": d.time_offset_s, "prior_std_s": 0.0005}
     }
     f = make_fusion("kalman", **known)
+    assert isinstance(f, StreamingPitchFusion)  # what make_fusion builds for this back end
     r = kit.replay(f, d, fe)
     err = np.abs(r.error_deg(d))
     assert f.stats.get("gated") == 1

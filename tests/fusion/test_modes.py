@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -12,6 +13,10 @@ from roadpreview.fusion import VisualPitch, make_fusion
 from roadpreview.fusion.config import ModeConfig
 from roadpreview.fusion.mode_machine import ModeSupervisor, VisionTrust
 from roadpreview.types import FusionMode
+
+if TYPE_CHECKING:  # conftest is not importable at run time (--import-mode=importlib)
+    from tests.fusion.conftest import FusionTestKit
+
 
 DEG = math.pi / 180.0
 FUSED, VISUAL_ONLY = int(FusionMode.FUSED), int(FusionMode.VISUAL_ONLY)
@@ -23,6 +28,12 @@ def _trusted(cfg: ModeConfig | None = None) -> ModeSupervisor:
     sup = ModeSupervisor(cfg or ModeConfig())
     assert sup.good_frame(0.0, True)
     return sup
+
+
+def _trust(sup: ModeSupervisor) -> VisionTrust:
+    """``sup.trust`` read afresh: mypy keeps an asserted ``sup.trust`` narrowed across the
+    calls that change it."""
+    return sup.trust
 
 
 def test_short_failures_are_bridged_a_lasting_one_loses_vision() -> None:
@@ -79,7 +90,7 @@ def test_validation_survives_single_failures_not_a_long_gap() -> None:
     assert not sup.good_frame(t, True)
     t += sup.cfg.loss_time_s + 0.1
     sup.bad_frame(t)
-    assert sup.trust is VisionTrust.LOST
+    assert _trust(sup) is VisionTrust.LOST
 
 
 def test_revalidation_needs_consistent_frames_for_the_whole_period() -> None:
@@ -93,7 +104,7 @@ def test_revalidation_needs_consistent_frames_for_the_whole_period() -> None:
         t += dt
     assert sup.trust is VisionTrust.VALIDATING
     assert not sup.good_frame(t, False)  # disagrees with the gyro: back to the start
-    assert sup.trust is VisionTrust.LOST
+    assert _trust(sup) is VisionTrust.LOST
     t += dt
     start = t
     while not sup.good_frame(t, True):
@@ -137,7 +148,7 @@ def test_repeatedly_gated_vision_is_lost() -> None:
 
 # -- the whole fusion on synthetic streams ---------------------------------------------------
 @pytest.mark.parametrize("backend", ["kalman", "factor-graph"])
-def test_imu_timeout_gives_visual_only_and_back(kit, backend: str) -> None:  # type: ignore[no-untyped-def]
+def test_imu_timeout_gives_visual_only_and_back(kit: FusionTestKit, backend: str) -> None:
     """No gyro from 8 to 9 s: VISUAL_ONLY from the timeout (0.2 s) on, FUSED again when it
     returns, no step in the output, and the bias estimate survives the outage."""
     d = kit.synthetic(14.0, seed=2, imu_gaps=((8.0, 9.0),))
@@ -156,7 +167,7 @@ def test_imu_timeout_gives_visual_only_and_back(kit, backend: str) -> None:  # t
     assert abs(np.degrees(r.bias[i10] - r.bias[i8])) < 0.02
 
 
-def test_neither_source_is_degraded_and_the_std_grows(kit) -> None:  # type: ignore[no-untyped-def]
+def test_neither_source_is_degraded_and_the_std_grows(kit: FusionTestKit) -> None:
     d = kit.synthetic(14.0, seed=5, loss=((8.0, 10.0),), imu_gaps=((8.5, 9.5),))
     r = kit.replay(make_fusion("kalman"), d, kit.front_end(d))
     deg = np.flatnonzero(r.mode == DEGRADED)
@@ -169,7 +180,7 @@ def test_neither_source_is_degraded_and_the_std_grows(kit) -> None:  # type: ign
     assert np.all(r.mode[(r.t > 8.05 + loss) & (r.t < 8.6)] == IMU_ONLY)
 
 
-def test_vision_that_disagrees_with_the_gyro_is_not_trusted_again(kit) -> None:  # type: ignore[no-untyped-def]
+def test_vision_that_disagrees_with_the_gyro_is_not_trusted_again(kit: FusionTestKit) -> None:
     """After a loss the front end reports good quality but its pitch is wrong (a rate error
     of 1 deg/s against its key frame): it is never re-validated; the gyro carries on."""
     d = kit.synthetic(16.0, seed=6, loss=((6.0, 8.0),))
@@ -184,7 +195,7 @@ def test_vision_that_disagrees_with_the_gyro_is_not_trusted_again(kit) -> None: 
     assert np.all(clean.mode[r.t > 8.4] == FUSED)
 
 
-def test_startup_is_visual_only_until_the_time_offset_is_known(kit) -> None:  # type: ignore[no-untyped-def]
+def test_startup_is_visual_only_until_the_time_offset_is_known(kit: FusionTestKit) -> None:
     """The gyro is fused once the camera-IMU offset is estimated (a 30 ms error would pull
     the pitch); the start is then processed again with the gyro, without a step."""
     d = kit.synthetic(10.0, seed=7, offset_s=0.06)
@@ -199,7 +210,7 @@ def test_startup_is_visual_only_until_the_time_offset_is_known(kit) -> None:  # 
     assert steps[first - 3 : first + 3].max() < 0.02
 
 
-def test_failures_pushed_explicitly_count_as_bad_frames(kit) -> None:  # type: ignore[no-untyped-def]
+def test_failures_pushed_explicitly_count_as_bad_frames(kit: FusionTestKit) -> None:
     d = kit.synthetic(6.0, seed=8, loss=((3.0, 4.0),))
     f = make_fusion("kalman")
     r = kit.replay(f, d, kit.front_end(d))

@@ -10,6 +10,8 @@ Each test prints the figure it measured (``pytest -s``).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -17,24 +19,29 @@ import pytest
 from roadpreview.fusion import make_fusion
 from roadpreview.types import FusionMode
 
+if TYPE_CHECKING:  # conftest is not importable at run time (--import-mode=importlib)
+    from tests.fusion.conftest import Drive, FrontEnd, FusionTestKit, Replay
+
 DEG = math.pi / 180.0
 FUSED, IMU_ONLY = int(FusionMode.FUSED), int(FusionMode.IMU_ONLY)
 
 
 @pytest.fixture(scope="module")
-def drive(sim_drive):  # type: ignore[no-untyped-def]
+def drive(sim_drive: Callable[..., Drive]) -> Drive:
     """60 s ``texture-loss`` drive: fog 7-19 s, tunnel 27-37 s, night 45-56 s; the recorded
     smartphone IMU (imu.csv) with a 0.5 deg/s pitch-rate bias plus the phone's random walk."""
     return sim_drive("texture-loss", seed=0, duration_s=60.0, pitch_bias_deg_s=0.5)
 
 
 @pytest.fixture(scope="module")
-def kalman_run(drive, kit):  # type: ignore[no-untyped-def]
+def kalman_run(drive: Drive, kit: FusionTestKit) -> tuple[FrontEnd, Replay]:
     fe = kit.front_end(drive)
     return fe, kit.replay(make_fusion("kalman"), drive, fe)
 
 
-def test_fused_error_rms_within_one_second_windows(drive, kit, kalman_run) -> None:
+def test_fused_error_rms_within_one_second_windows(
+    drive: Drive, kit: FusionTestKit, kalman_run: tuple[FrontEnd, Replay]
+) -> None:
     """FUSED mode: the error RMS within every 1 s window (the detector's window, eq. 1) is
     at most 0.02 deg. Before the first texture loss nothing has drifted and the absolute
     error meets it too; after a loss the pitch level carries the drift of the loss (the
@@ -56,7 +63,9 @@ def test_fused_error_rms_within_one_second_windows(drive, kit, kalman_run) -> No
     assert absolute.max() <= 0.02
 
 
-def test_bias_converges_within_ten_seconds(drive, kalman_run) -> None:
+def test_bias_converges_within_ten_seconds(
+    drive: Drive, kalman_run: tuple[FrontEnd, Replay]
+) -> None:
     """The gyro bias (0.5 deg/s plus walk) is estimated within 0.05 deg/s after 10 s."""
     _, r = kalman_run
     true_bias = np.interp(r.t, drive.imu_t - drive.time_offset_s, drive.imu_bias)
@@ -69,7 +78,9 @@ def test_bias_converges_within_ten_seconds(drive, kalman_run) -> None:
     assert err[after].max() < 0.05
 
 
-def test_mode_switches_where_texture_is_lost_and_regained(drive, kalman_run) -> None:
+def test_mode_switches_where_texture_is_lost_and_regained(
+    drive: Drive, kalman_run: tuple[FrontEnd, Replay]
+) -> None:
     """FUSED -> IMU_ONLY within 0.5 s of each truth texture loss and back within 0.5 s of the
     texture returning (after re-validation), nothing else after the start."""
     _, r = kalman_run
@@ -94,7 +105,9 @@ def test_mode_switches_where_texture_is_lost_and_regained(drive, kalman_run) -> 
     assert np.all((d_regain >= 0) & (d_regain <= 0.5))
 
 
-def test_no_step_in_the_output_at_a_mode_switch(drive, kalman_run) -> None:
+def test_no_step_in_the_output_at_a_mode_switch(
+    drive: Drive, kalman_run: tuple[FrontEnd, Replay]
+) -> None:
     """At every switch the output moves by what the camera moved, within 0.02 deg."""
     _, r = kalman_run
     mode = r.mode.astype(int)
@@ -107,7 +120,9 @@ def test_no_step_in_the_output_at_a_mode_switch(drive, kalman_run) -> None:
     assert np.abs(jumps).max() < 0.02
 
 
-def test_imu_only_covariance_grows_honestly(drive, kalman_run) -> None:
+def test_imu_only_covariance_grows_honestly(
+    drive: Drive, kalman_run: tuple[FrontEnd, Replay]
+) -> None:
     """While vision is lost the std grows, and it covers the drift (within 3 sigma)."""
     _, r = kalman_run
     err = r.error_deg(drive)
@@ -121,7 +136,9 @@ def test_imu_only_covariance_grows_honestly(drive, kalman_run) -> None:
         assert np.all(drift[5:] <= 3 * sigma[5:] + 0.005)
 
 
-def test_texture_loss_fused_beats_drifting_imu_only(imu_realisations, kit) -> None:
+def test_texture_loss_fused_beats_drifting_imu_only(
+    imu_realisations: Callable[..., list[Drive]], kit: FusionTestKit
+) -> None:
     """The paper's observation reproduced and beaten, over 16 IMU realisations of one drive
     (noise, bias walk, clock offset). During the 10.2 s tunnel the integrated gyro with its
     uncorrected 0.5 deg/s bias drifts past 1 deg every time; the fused pitch drifts less than
@@ -152,7 +169,9 @@ def test_texture_loss_fused_beats_drifting_imu_only(imu_realisations, kit) -> No
     assert fused_a.max() < 0.25
 
 
-def test_texture_loss_with_an_automotive_gyro(imu_realisations, kit) -> None:
+def test_texture_loss_with_an_automotive_gyro(
+    imu_realisations: Callable[..., list[Drive]], kit: FusionTestKit
+) -> None:
     """The same 0.5 deg/s bias on an automotive-grade gyro: every 10 s loss under 0.1 deg."""
     drives = imu_realisations("texture-loss", 0, list(range(6)), grade="automotive")
     worst = 0.0
@@ -169,7 +188,9 @@ def test_texture_loss_with_an_automotive_gyro(imu_realisations, kit) -> None:
 
 
 @pytest.mark.parametrize("seed", [0, 3, 5])
-def test_time_offset_within_five_ms(sim_drive, kit, seed: int) -> None:
+def test_time_offset_within_five_ms(
+    sim_drive: Callable[..., Drive], kit: FusionTestKit, seed: int
+) -> None:
     """``wild`` drives (recorded IMU, random 0-80 ms clock offset): the estimate is within
     5 ms of the simulator's offset, with a high confidence."""
     d = sim_drive("wild", seed=seed, duration_s=30.0, pitch_bias_deg_s=None)
@@ -184,7 +205,9 @@ def test_time_offset_within_five_ms(sim_drive, kit, seed: int) -> None:
     assert r.offset_conf[-1] > 0.9
 
 
-def test_time_offset_over_many_clock_offsets(imu_realisations, kit) -> None:
+def test_time_offset_over_many_clock_offsets(
+    imu_realisations: Callable[..., list[Drive]], kit: FusionTestKit
+) -> None:
     """Twelve clock offsets drawn in 0-80 ms on one drive: every estimate within 5 ms."""
     errs = []
     for d in imu_realisations("wild", 1, list(range(12)), duration_s=30.0):
@@ -197,7 +220,9 @@ def test_time_offset_over_many_clock_offsets(imu_realisations, kit) -> None:
     assert max(errs) < 5.0
 
 
-def test_kalman_and_factor_graph_agree(drive, kit, kalman_run) -> None:
+def test_kalman_and_factor_graph_agree(
+    drive: Drive, kit: FusionTestKit, kalman_run: tuple[FrontEnd, Replay]
+) -> None:
     """The same drive through both back ends: within 0.01 deg at every frame, same modes."""
     fe, rk = kalman_run
     rg = kit.replay(make_fusion("factor-graph"), drive, fe)
@@ -211,7 +236,9 @@ def test_kalman_and_factor_graph_agree(drive, kit, kalman_run) -> None:
     assert np.degrees(np.abs(rk.bias - rg.bias)).max() < 0.005
 
 
-def test_gyro_arriving_after_the_frame_is_extrapolated_then_committed(drive, kit) -> None:
+def test_gyro_arriving_after_the_frame_is_extrapolated_then_committed(
+    drive: Drive, kit: FusionTestKit
+) -> None:
     """Frames estimated before their gyro has arrived (no latency, stamps 0-80 ms late):
     the held-rate extrapolation costs little, and the committed result is unaffected."""
     fe = kit.front_end(drive)

@@ -120,7 +120,9 @@ def _plain_estimate(est: TimeOffsetEstimator, gyro: GyroHistory) -> tuple[float,
     at both ends of every increment for every lag): what `estimate` computes faster."""
     cfg = est.cfg
     ta, tb, d = (np.array(x) for x in (est.track.ta, est.track.tb, est.track.d))
-    ok = tb + cfg.max_offset_s <= gyro.newest
+    newest = gyro.newest
+    assert newest is not None
+    ok = tb + cfg.max_offset_s <= newest
     ta, tb, d = ta[ok], tb[ok], d[ok]
     span = tb - ta
     v = d / span

@@ -23,23 +23,27 @@ fusion falls back to IMU_ONLY inside it, says why, and is FUSED again once it li
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
 from roadpreview.apps.replay import ReplayInputs, ReplayResult, replay
 from roadpreview.pipeline.config import PipelineConfig
+from roadpreview.pipeline.truthmatch import MatchReport, MatchRow
 from roadpreview.sim.presets import demo
+from roadpreview.sim.recording import Recording
 from roadpreview.types import FusionMode
 
 
 @pytest.fixture(scope="module")
-def demo_replay(make_recording) -> ReplayResult:  # type: ignore[no-untyped-def]
+def demo_replay(make_recording: Callable[..., Recording]) -> ReplayResult:
     rec = make_recording("demo", seed=0, duration_s=None, width=None, height=None)
     return replay(ReplayInputs.from_recording(rec.folder), keep_results=True)
 
 
 @pytest.fixture(scope="module")
-def demo_run(demo_replay: ReplayResult):  # type: ignore[no-untyped-def]
+def demo_run(demo_replay: ReplayResult) -> MatchReport:
     assert demo_replay.match is not None
     return demo_replay.match
 
@@ -61,28 +65,30 @@ def test_demo_fog_bank_falls_back_to_the_imu_and_recovers(demo_replay: ReplayRes
     assert all(fog.start_s <= t <= fog.end_s for t, _ in inside if t > 3.0), modes
 
 
-def test_demo_raises_at_most_one_false_alarm_per_minute(demo_run) -> None:  # type: ignore[no-untyped-def]
+def test_demo_raises_at_most_one_false_alarm_per_minute(demo_run: MatchReport) -> None:
     assert demo_run.duration_s >= 55.0
     assert demo_run.false_alarms_per_min <= 1.0, demo_run.table()
 
 
-def _two_track(demo_run):  # type: ignore[no-untyped-def]
+def _two_track(demo_run: MatchReport) -> list[MatchRow]:
     rows = [r for r in demo_run.rows if r.expected and r.lead_side == "both"]
     assert len(rows) >= 4, demo_run.table()  # four bumps and a cushion in the preset
     return rows
 
 
-def test_demo_alerts_are_true_previews(demo_run) -> None:  # type: ignore[no-untyped-def]
+def test_demo_alerts_are_true_previews(demo_run: MatchReport) -> None:
     hits = [r for r in demo_run.rows if r.alert is not None]
     assert len(hits) >= 3, demo_run.table()
     for r in hits:
         assert r.lead_time_s > 0.5, demo_run.table()  # (False for NaN: no arrival)
+        assert r.alert is not None  # (a hit)
+        assert r.alert.height_mm is not None
         assert r.alert.height_mm * r.height_mm > 0, demo_run.table()  # bump +, pothole -
 
 
 def test_demo_scores_every_two_track_anomaly_well_above_its_background(
-    demo_replay: ReplayResult, demo_run
-) -> None:  # type: ignore[no-untyped-def]
+    demo_replay: ReplayResult, demo_run: MatchReport
+) -> None:
     """The best score whose window describes the crossing (front axle within -0.3..+0.8 s)
     is well above the background (>= 0.75 of the threshold, i.e. >= 4.5 sigma), and its
     fitted road input is above the alert's minimum height and not above twice the truth.
@@ -107,7 +113,9 @@ def test_demo_scores_every_two_track_anomaly_well_above_its_background(
     strict=True,
     reason="issue 14 target not met: the 60 mm bump at 14.7 m scores 5.4 < threshold_z 6",
 )
-def test_demo_detects_every_two_track_anomaly_before_the_ego_reaches_it(demo_run) -> None:  # type: ignore[no-untyped-def]
+def test_demo_detects_every_two_track_anomaly_before_the_ego_reaches_it(
+    demo_run: MatchReport,
+) -> None:
     for r in _two_track(demo_run):
         assert r.alert is not None, f"event {r.event_index} ({r.kind}) missed\n{demo_run.table()}"
         assert r.lead_time_s > 0.5, demo_run.table()

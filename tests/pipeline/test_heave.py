@@ -4,7 +4,7 @@ and what happens without an accelerometer (docs/method.md, "Heave")."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 from typing import Any
 
@@ -20,6 +20,7 @@ from roadpreview.fusion.heave import HeaveConfig
 from roadpreview.loop import run
 from roadpreview.pipeline import Pipeline, PipelineConfig
 from roadpreview.pipeline.pipeline import FrameResult
+from roadpreview.sim.recording import Recording
 from roadpreview.sinks.files import ResultsSink
 from roadpreview.sources.can import CanLogSource, make_decoder
 from roadpreview.sources.video import VideoFileSource
@@ -32,12 +33,12 @@ EGO_CROSSING = (7.9, 8.9)
 
 
 @pytest.fixture(scope="module")
-def demo10(make_recording):  # type: ignore[no-untyped-def]
+def demo10(make_recording: Callable[..., Recording]) -> Recording:
     return make_recording("demo", seed=0, duration_s=10.0, width=1280, height=720)
 
 
 @pytest.fixture(scope="module")
-def results(demo10) -> list[FrameResult]:  # type: ignore[no-untyped-def]
+def results(demo10: Recording) -> list[FrameResult]:
     out = replay(ReplayInputs.from_recording(demo10.folder), keep_results=True).results
     assert out is not None
     return out
@@ -60,7 +61,9 @@ def _window_spread(x: Array, n: int = 30, detrend: bool = False) -> Array:
     return out
 
 
-def test_a_rising_camera_is_taken_out_of_the_lead_trajectory(demo10, results) -> None:  # type: ignore[no-untyped-def]
+def test_a_rising_camera_is_taken_out_of_the_lead_trajectory(
+    demo10: Recording, results: list[FrameResult]
+) -> None:
     """Around the ego's bump crossing, with the TRUE pitch removed (so that only the heave is
     left to compensate), subtracting our heave term shrinks the detector's s (detrended, as
     it runs by default) by more than 40 % (measured: 1.58 -> 0.60 px); adding it instead
@@ -85,7 +88,7 @@ def test_a_rising_camera_is_taken_out_of_the_lead_trajectory(demo10, results) ->
     assert s(y_c) < 0.9 * s(y_c + hpx)  # with vs without the heave term
 
 
-def test_the_heave_follows_the_camera_height(demo10, results) -> None:  # type: ignore[no-untyped-def]
+def test_the_heave_follows_the_camera_height(demo10: Recording, results: list[FrameResult]) -> None:
     """heave_m against the simulator's camera height (high-passed at the observer's 0.2 Hz,
     zero phase): correlated above 0.9 over the crossing, the error's 1 s spread below 40 %
     of the heave's (measured 8.9 of 29 mm: the high-pass's phase lead at 1-2 Hz)."""
@@ -127,7 +130,7 @@ def _run_pipeline(
 
 
 @pytest.mark.parametrize("case", ["no accelerometer on the bus", "heave disabled"])
-def test_without_heave_the_compensation_is_the_papers(demo10, case: str) -> None:  # type: ignore[no-untyped-def]
+def test_without_heave_the_compensation_is_the_papers(demo10: Recording, case: str) -> None:
     """No IMU_ACCEL frames (only rates) or ``[heave] enabled = false``: heave_m is NaN,
     heave_px 0 and y_c = y - f tan φ exactly; the fusion is unaffected (FUSED)."""
     accel_id = load_database().get_message_by_name(IMU_ACCEL).frame_id

@@ -17,7 +17,7 @@ def test_grade_is_removed_and_bump_pitching_kept() -> None:
     grade = math.radians(1.5)  # a hill: the ego and the lead both pitch by it
     horizon = []
     for k in range(int(10 * tau / dt)):
-        pipe._update_horizon(k * dt, grade)
+        pipe._horizon.update(k * dt, grade)
         horizon.append(pipe.pitch_rad)
     assert horizon[0] == 0.0  # the first frame is the reference
     assert abs(horizon[-1]) < 1e-4 * grade  # after 10 time constants: gone
@@ -27,7 +27,7 @@ def test_grade_is_removed_and_bump_pitching_kept() -> None:
     out = []
     for k in range(int(5 / dt)):
         t = t0 + k * dt
-        pipe._update_horizon(t, grade + amp * math.sin(2 * math.pi * t))
+        pipe._horizon.update(t, grade + amp * math.sin(2 * math.pi * t))
         out.append(pipe.pitch_rad)
     peak = max(abs(v) for v in out[len(out) // 2 :])
     assert peak == pytest.approx(amp, rel=0.1)

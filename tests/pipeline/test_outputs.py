@@ -15,6 +15,7 @@ import cantools
 import e2e.p01
 import pytest
 from cantools.database.can import Database
+from cantools.typechecking import DecodeResultType, SignalDictType
 
 from roadpreview.canbus import (
     OutputDecoder,
@@ -80,6 +81,12 @@ def plain_db() -> Database:
     return db
 
 
+def _signals(decoded: DecodeResultType) -> SignalDictType:
+    """cantools decodes a plain (non-container) message to a signal dict: narrow to it."""
+    assert isinstance(decoded, dict)
+    return decoded
+
+
 @dataclass(frozen=True)
 class _Result:
     """The part of a `FrameResult` the CAN sinks read."""
@@ -111,7 +118,8 @@ class _Log(CanMemorySink):
             self.next_status = t + self.period_s
 
     def write(self, path: Path) -> int:
-        return write_can_log(path, self.messages)
+        count: int = write_can_log(path, self.messages)
+        return count
 
 
 def _run() -> _Log:
@@ -181,7 +189,7 @@ def test_the_log_decodes_to_what_was_sent(plain_db: Database) -> None:
     # a plain cantools database reads the same log
     by_id = {m.frame_id: m for m in plain_db.messages}
     heads = [m for m in log.messages if m.arbitration_id in (0x200, 0x203)]
-    pairs = [by_id[m.arbitration_id].decode(m.data) for m in heads]
+    pairs = [_signals(by_id[m.arbitration_id].decode(bytes(m.data))) for m in heads]
     assert [p["AlertId"] for p in pairs] == [1, 1, 2, 2]
     assert str(pairs[1]["DetailDetector"]) == "STD"
     assert pairs[2]["AlertHeight"] == pytest.approx(-66.0, abs=1.0)

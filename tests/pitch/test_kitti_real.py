@@ -26,18 +26,30 @@ KITTI = CameraModel(width=1242, height=375, fx=721.5377, fy=721.5377, cx=609.559
 LEAD_REGION = (slice(180, 375), slice(520, 800))
 
 
+def _gray(path: Path) -> np.ndarray:
+    image = cv2.imread(str(path))
+    assert image is not None, path
+    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+
+
 def _pairs(kitti_dir: Path) -> list[tuple[np.ndarray, np.ndarray]]:
     files = sorted((kitti_dir / "frames").glob("*.png"))
     assert len(files) == 78
-    frames = [cv2.cvtColor(cv2.imread(str(f)), cv2.COLOR_BGR2GRAY) for f in files]
+    frames = [_gray(f) for f in files]
     mask = np.full(frames[0].shape, 255, np.uint8)
     mask[LEAD_REGION] = 0
-    lk = {"winSize": (21, 21), "maxLevel": 3}
+    win, levels = (21, 21), 3
     out = []
     for prev, cur in itertools.pairwise(frames):
         p0 = cv2.goodFeaturesToTrack(prev, 1500, 0.01, 7, mask=mask)
-        p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev, cur, p0, None, **lk)
-        pb, st2, _ = cv2.calcOpticalFlowPyrLK(cur, prev, p1, None, **lk)
+        # nextPts: without OPTFLOW_USE_INITIAL_FLOW only its buffer is used (the stubs take
+        # no None)
+        p1, st1, _ = cv2.calcOpticalFlowPyrLK(
+            prev, cur, p0, p0.copy(), winSize=win, maxLevel=levels
+        )
+        pb, st2, _ = cv2.calcOpticalFlowPyrLK(
+            cur, prev, p1, p1.copy(), winSize=win, maxLevel=levels
+        )
         fb = np.linalg.norm((pb - p0).reshape(-1, 2), axis=1)
         ok = (st1.ravel() == 1) & (st2.ravel() == 1) & (fb < 0.5)
         out.append((p0.reshape(-1, 2)[ok], p1.reshape(-1, 2)[ok]))

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from roadpreview.canbus.samples import ImuMeasurements
 from roadpreview.configtools import from_mapping, to_mapping
 from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.sim.canlog import IMU_CSV_COLUMNS, read_imu_csv, write_imu_csv
@@ -22,7 +23,6 @@ from roadpreview.sim.imu import (
     STANDARD_GRAVITY_M_S2,
     STANDSTILL,
     ImuConfig,
-    ImuMeasurements,
     SpeedSensorConfig,
     body_rates_from_euler,
     rotation_body_to_world,
@@ -37,7 +37,9 @@ def _grid(duration_s: float) -> np.ndarray:
     return np.arange(0.0, duration_s + FINE_DT / 2, FINE_DT)
 
 
-def _at_rest(t: np.ndarray, roll: float = 0.0, pitch: float = 0.0) -> tuple[np.ndarray, ...]:
+def _at_rest(
+    t: np.ndarray, roll: float = 0.0, pitch: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n = len(t)
     att = np.tile([roll, pitch, 0.0], (n, 1))
     return np.zeros((n, 3)), np.zeros((n, 3)), att

@@ -76,12 +76,12 @@ def test_lead_rise_moves_rear_up_by_f_delta_over_d(
     # the rear face's pixels in frame a (mask rows between the face's top and bottom edge)
     top = camera.cy + f * (CAM_H - SHAPE.height_m) / d
     bottom = camera.cy + f * (CAM_H - SHAPE.ground_clearance_m) / d
-    m = np.where(a.vehicle_mask == LEAD, 255, 0).astype(np.uint8)
+    m: np.ndarray = np.where(a.vehicle_mask == LEAD, 255, 0).astype(np.uint8)
     m[: math.ceil(top) + 1] = 0
     m[int(bottom) - 1 :] = 0
     m = cv2.erode(m, np.ones((5, 5), np.uint8))
     assert np.count_nonzero(m) > 500
-    warp = np.eye(2, 3, dtype=np.float32)
+    warp: np.ndarray = np.eye(2, 3, dtype=np.float32)
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-6)
     _, warp = cv2.findTransformECC(
         gray(a.image).astype(np.float32),
@@ -131,7 +131,8 @@ def _rot(pitch: float, roll: float, yaw: float) -> np.ndarray:
     yaw_m = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
     pitch_m = np.array([[cp, 0, -sp], [0, 1, 0], [sp, 0, cp]])  # nose (+X) up to +Z
     roll_m = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])  # left (+Y) up to +Z
-    return yaw_m @ pitch_m @ roll_m
+    rot: np.ndarray = yaw_m @ pitch_m @ roll_m
+    return rot
 
 
 def test_lead_ground_truth_is_the_projected_rear_centre_and_mask_covers_box(
@@ -177,6 +178,7 @@ def test_lead_ground_truth_is_the_projected_rear_centre_and_mask_covers_box(
     assert xs.max() <= x1 + 1.0
     assert ys.min() >= y0 - 1.0
     assert ys.max() <= y1 + 1.0
+    assert fr.lead_rear_center_px is not None
     u, v = fr.lead_rear_center_px
     assert fr.vehicle_mask[round(v), round(u)] == LEAD
     assert set(np.unique(fr.vehicle_mask)) == {0, LEAD, 8}
@@ -202,7 +204,7 @@ def _usable_corners(
     bg = cv2.erode(
         np.where(a.vehicle_mask == 0, 255, 0).astype(np.uint8), np.ones((15, 15), np.uint8)
     )
-    eig = cv2.cornerMinEigenVal(ga, 5, 3)
+    eig = cv2.cornerMinEigenVal(ga, 5, ksize=3)
     top = float(eig[bg > 0].max())
     tau = 0.01 * top if tau is None else tau  # goodFeaturesToTrack's qualityLevel 0.01
     if top < tau:
@@ -210,7 +212,8 @@ def _usable_corners(
     pts = cv2.goodFeaturesToTrack(ga, 5000, tau / top, 8, mask=bg, blockSize=5)
     if pts is None:
         return 0, tau
-    p1, st, _ = cv2.calcOpticalFlowPyrLK(ga, gb, pts, None, winSize=(21, 21), maxLevel=3)
+    # nextPts: without OPTFLOW_USE_INITIAL_FLOW only its buffer is used (the stubs take no None)
+    p1, st, _ = cv2.calcOpticalFlowPyrLK(ga, gb, pts, pts.copy(), winSize=(21, 21), maxLevel=3)
     ra, _ = renderer.world_to_camera(pose(0.0))
     rb, _ = renderer.world_to_camera(pose(PHI_TRACK))
     truth = camera.project((camera.rays(pts.reshape(-1, 2)) @ ra) @ rb.T)

@@ -15,6 +15,7 @@ from roadpreview.errors import ConfigError, MissingDependencyError
 from roadpreview.vision import FINDERS, make_finder
 from roadpreview.vision.base import Detection
 from roadpreview.vision.frontend import VisionConfig, VisionFrontEnd
+from roadpreview.vision.motion import MotionLeadFinder
 from roadpreview.vision.tracker import LeadTrackerConfig, LeadVehicleTracker, choose_target
 
 CAM = CameraModel.from_fov(320, 180, 54.0)
@@ -156,7 +157,8 @@ def test_the_config_accepts_every_registered_finder_and_only_those() -> None:
 
 def test_the_front_end_adapts_to_what_the_finder_class_declares() -> None:
     motion = VisionFrontEnd(CAM, VisionConfig(finder="motion", small_width_px=200))
-    assert motion.finder.config.small_width_px == 200  # type: ignore[attr-defined]
+    assert isinstance(motion.finder, MotionLeadFinder)
+    assert motion.finder.config.small_width_px == 200
     assert motion.tracker.config.min_distance_m == LeadTrackerConfig().min_distance_m
     box = VisionFrontEnd(
         CAM, VisionConfig(finder="box", finder_options={"box": (100, 80, 200, 150)})

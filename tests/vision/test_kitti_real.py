@@ -61,7 +61,8 @@ def _check_lead_tracked(outs: list[FrameVision], truth: np.ndarray, first: int) 
         x0, _, x1, _ = o.lead.box
         assert x0 < 630 < x1, (o.index, o.lead.box)
     d = np.array([o.lead.distance_m for o in outs[first:]])
-    return (d - truth[first:]) / truth[first:]
+    rel: np.ndarray = (d - truth[first:]) / truth[first:]
+    return rel
 
 
 @pytest.mark.shared

@@ -111,7 +111,9 @@ def test_letterbox_round_trip(style: str) -> None:
         assert float(x[0, 0, -1, 0]) == 114.0
 
 
-def _session(inputs: list[tuple[str, list[object]]], outputs: list[tuple[str, list[object]]]):  # type: ignore[no-untyped-def]
+def _session(
+    inputs: list[tuple[str, list[object]]], outputs: list[tuple[str, list[object]]]
+) -> SimpleNamespace:
     def items(spec: list[tuple[str, list[object]]]) -> list[SimpleNamespace]:
         return [SimpleNamespace(name=n, shape=s) for n, s in spec]
 

@@ -8,7 +8,7 @@ session). The tracker is started from the true lead box of the first frame (the
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import cv2
 import numpy as np
@@ -60,13 +60,16 @@ def y_errors(outs: list[FrameVision], rec: Recording, model: str) -> np.ndarray:
     assert len({o.lead.track_id for o in outs}) == 1
     d = y - truth
     if model == "constant":
-        return d - d.mean()
+        centred: np.ndarray = d - d.mean()
+        return centred
     A = np.c_[np.ones_like(d), 1.0 / rec.truth["lead_distance_m"]]
     coef, *_ = np.linalg.lstsq(A, d, rcond=None)
     return np.asarray(d - A @ coef)
 
 
-def test_y_follows_the_lead_rear_within_half_a_pixel_at_a_fixed_gap(make_recording) -> None:  # type: ignore[no-untyped-def]
+def test_y_follows_the_lead_rear_within_half_a_pixel_at_a_fixed_gap(
+    make_recording: Callable[..., Recording],
+) -> None:
     # the paper's controlled drive: 10 m gap, 20 km/h, the lead crosses a 6 cm speed bump
     rec = make_recording("controlled", **DRIVE)
     outs = run_box(rec)
@@ -77,7 +80,7 @@ def test_y_follows_the_lead_rear_within_half_a_pixel_at_a_fixed_gap(make_recordi
     assert rms < 0.5, rms  # measured 0.03 px
 
 
-def test_reseeding_keeps_y_continuous(make_recording) -> None:  # type: ignore[no-untyped-def]
+def test_reseeding_keeps_y_continuous(make_recording: Callable[..., Recording]) -> None:
     rec = make_recording("controlled", **DRIVE)
     # re-seed whenever 5 % of the points are lost: many re-seeds in 10 s
     cfg = VisionConfig(tracker=LeadTrackerConfig(reseed_fraction=0.95))
@@ -88,7 +91,7 @@ def test_reseeding_keeps_y_continuous(make_recording) -> None:  # type: ignore[n
     assert float(np.max(np.abs(np.diff(err)))) < 0.5  # no jump at any re-seed
 
 
-def test_y_follows_the_lead_on_a_wild_drive(make_recording) -> None:  # type: ignore[no-untyped-def]
+def test_y_follows_the_lead_on_a_wild_drive(make_recording: Callable[..., Recording]) -> None:
     rec = make_recording("wild", masks=True, **DRIVE)
     outs = run_box(rec)
     err = y_errors(outs, rec, "distance")
@@ -96,7 +99,9 @@ def test_y_follows_the_lead_on_a_wild_drive(make_recording) -> None:  # type: ig
     assert rms < 0.5, rms  # measured 0.18 px (the lead is 26-30 m ahead, 24 px wide)
 
 
-def test_background_correspondences_avoid_vehicles(make_recording) -> None:  # type: ignore[no-untyped-def]
+def test_background_correspondences_avoid_vehicles(
+    make_recording: Callable[..., Recording],
+) -> None:
     rec = make_recording("wild", masks=True, **DRIVE)
     outs = run_box(rec)
     n = on_lead = on_other = 0
@@ -173,14 +178,16 @@ def find_rate(rec: Recording) -> tuple[float, int]:
     return hits / len(t), changes
 
 
-def test_motion_finds_the_lead_at_the_paper_gap(make_recording) -> None:  # type: ignore[no-untyped-def]
+def test_motion_finds_the_lead_at_the_paper_gap(make_recording: Callable[..., Recording]) -> None:
     rec = make_recording("controlled", **DRIVE)  # 10 m gap, 20 km/h
     rate, changes = find_rate(rec)
     assert rate >= 0.95, rate
     assert changes <= 2, changes
 
 
-def test_motion_finds_the_lead_in_95_percent_of_a_wild_drive(make_recording) -> None:  # type: ignore[no-untyped-def]
+def test_motion_finds_the_lead_in_95_percent_of_a_wild_drive(
+    make_recording: Callable[..., Recording],
+) -> None:
     rec = make_recording("wild", masks=True, **DRIVE)
     rate, _ = find_rate(rec)
     assert rate >= 0.95, rate  # measured 99.7 % (frame 0 has no earlier frame)

@@ -24,7 +24,9 @@ def _tracker() -> LeadVehicleTracker:
     return tr
 
 
-def _scaled(box: tuple[float, float, float, float], k: float) -> tuple[float, ...]:
+def _scaled(
+    box: tuple[float, float, float, float], k: float
+) -> tuple[float, float, float, float]:
     cx, cy = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
     hw, hh = k * (box[2] - box[0]) / 2, k * (box[3] - box[1]) / 2
     return (cx - hw, cy - hh, cx + hw, cy + hh)
