@@ -90,9 +90,12 @@ def test_can_log_decodes_to_the_true_pitch_rate(recording: Recording) -> None:
     t, pitch_rate = [], []
     for msg in read_can_log(recording.folder / "can.blf"):
         if msg.arbitration_id == rates.frame_id:
-            sig = rates.decode(msg.data)
+            sig = rates.decode(bytes(msg.data))
+            assert isinstance(sig, dict)
             t.append(msg.timestamp - recording.info["can_t0_unix_s"])
-            pitch_rate.append(math.radians(sig["PitchRate"]))
+            value = sig["PitchRate"]
+            assert isinstance(value, float | int)
+            pitch_rate.append(math.radians(value))
     assert len(t) == pytest.approx(3.0 * recording.info["imu_rate_hz"], abs=3)  # 3 s of IMU
     true_rate = np.interp(
         t, recording.truth["imu_t_stamp_s"], recording.truth["imu_true_rates_rad_s"][:, 1]
