@@ -565,9 +565,3 @@ class AnomalyConfig:
     alert: AlertConfig = field(default_factory=AlertConfig)
     roughness: RoughnessConfig = field(default_factory=RoughnessConfig)
     confirm: ConfirmConfig = field(default_factory=ConfirmConfig)
-
-    @property
-    def detector_config(self) -> DetectorConfig | TwoAxleConfig:
-        """The table of the chosen detector."""
-        table: DetectorConfig | TwoAxleConfig = getattr(self, DETECTORS[self.detector][2])
-        return table

@@ -217,7 +217,6 @@ class Pipeline:
         self._horizon = HorizonFilter(cfg.fusion.horizon_highpass_s)
         self._key_index = -1
         self._phi = 0.0
-        self._last_gyro_t = -math.inf
         self.frames = 0
         self.alerts_sent = 0
         #: samples the sources lost (undecodable, garbled, rejected) so far, for the
@@ -252,7 +251,6 @@ class Pipeline:
                 roll_rate=roll if math.isfinite(roll) else None,
                 yaw_rate=yaw if math.isfinite(yaw) else None,
             )
-            self._last_gyro_t = sample.t_s
 
     def push_speed(self, sample: SpeedSample) -> None:
         self._speed.push(sample.t_s, sample.speed_mps)
@@ -269,12 +267,6 @@ class Pipeline:
         first frame): the fused pitch of the last frame high-passed (``fusion.
         horizon_highpass_s``), since the slow part is the grade the lead shares."""
         return self._horizon.pitch_rad
-
-    @property
-    def last_gyro_t(self) -> float:
-        """Time stamp of the last gyro sample taken (-inf before the first): the daemon's
-        IMU watchdog."""
-        return self._last_gyro_t
 
     def push_vision(self, t: float, fv: FrameVision) -> FrameResult:
         """Steps 2-5 for a frame whose vision step is done (`push_frame` = vision + this).
