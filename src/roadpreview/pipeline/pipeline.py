@@ -23,7 +23,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, overload
+from typing import overload
 
 from roadpreview.anomaly import AlertBuilder, TrajectorySample, make_detector
 from roadpreview.anomaly.base import AnomalyEvent
@@ -144,7 +144,7 @@ class FrameResult:
         "road_class",
     )
 
-    def row(self) -> list[Any]:
+    def row(self) -> list[float | int | str]:
         """The frame as a row of the per-frame table (`COLUMNS`)."""
         return [
             self.t,
