@@ -1,5 +1,5 @@
-"""The one run loop: sources -> pipeline -> sinks. Replay, the daemon, the evaluation and
-the batch replay are thin compositions of it (`roadpreview.apps`, `roadpreview.eval`).
+"""The one run loop: sources -> pipeline -> sinks. Replay, the daemon and the evaluation
+are thin compositions of it (`roadpreview.apps`, `roadpreview.eval.runner`).
 
 ``run(sources, pipeline, sinks, pace=..., watchdogs=...)``:
 
@@ -316,7 +316,7 @@ def run(
 
 
 class _LoopState:
-    """The per-sample step of `run`, shared by the file and the live merge."""
+    """The per-sample step of `run`, whichever merge the samples come from."""
 
     def __init__(
         self,
