@@ -105,10 +105,9 @@ def _cycle(graph: dict[str, dict[str, str]]) -> list[str] | None:
 
 def test_no_import_cycle_between_packages() -> None:
     graph = _unit_graph()
-    cycle = _cycle(graph)
-    if cycle:
-        where = [graph[a][b] for a, b in itertools.pairwise(cycle)]
-        pytest.fail("import cycle " + " -> ".join(cycle) + f" (at {', '.join(where)})")
+    cycle = _cycle(graph) or []
+    where = [graph[a][b] for a, b in itertools.pairwise(cycle)]
+    assert not cycle, "import cycle " + " -> ".join(cycle) + f" (at {', '.join(where)})"
 
 
 def test_the_cycle_check_finds_a_planted_cycle() -> None:

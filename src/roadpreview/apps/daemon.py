@@ -29,7 +29,6 @@ from __future__ import annotations
 import logging
 import math
 import threading
-import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,12 +44,7 @@ from roadpreview.sinks import Sink
 from roadpreview.sinks.can import CanBusSink
 from roadpreview.sinks.files import FrameTableSink
 from roadpreview.sources.can import CanBusSource, make_decoder
-from roadpreview.sources.video import (
-    CameraDeviceSource,
-    ImageSequenceSource,
-    VideoFileSource,
-    camera_kind,
-)
+from roadpreview.sources.video import CameraDeviceSource, camera_kind, open_camera
 from roadpreview.types import Alert, CameraFrame, FusionMode, ImuSample, Sample, Status
 
 log = logging.getLogger(__name__)
@@ -266,12 +260,19 @@ class Daemon:
         self.summary = DaemonSummary()
         self.camera_source = opts.camera_source or cfg.daemon.camera_source
         self.camera_kind = camera_kind(self.camera_source)
-        self.camera = self._open_camera()
+        self.camera = open_camera(
+            self.camera_source,
+            start_s=opts.camera_start_s,
+            frames_csv=opts.frames_csv,
+            reopen_s=cfg.daemon.camera_reopen_s,
+        )
+        source = self.camera
+        first_due = -math.inf if isinstance(source, CameraDeviceSource) else source.start_s
         self.camera_watchdog = CameraWatchdog(
             self.camera_source,
             cfg.daemon.camera_timeout_s,
             cfg.can.status_period_s,
-            start_s=getattr(self.camera, "start_s", -math.inf),
+            start_s=first_due,
         )
         self.imu_watchdog = ImuWatchdog(cfg.can.imu_timeout_s)
         c = cfg.can
@@ -294,24 +295,11 @@ class Daemon:
             raise
         self._ran = False
 
-    def _open_camera(self) -> VideoFileSource | CameraDeviceSource | ImageSequenceSource:
-        opts, kind = self.options, self.camera_kind
-        if kind in ("device", "stream"):
-            return CameraDeviceSource(
-                self.camera_source, reopen_s=self.config.daemon.camera_reopen_s
-            )
-        start = opts.camera_start_s if opts.camera_start_s is not None else time.time()
-        if kind == "images":
-            return ImageSequenceSource(self.camera_source, start_s=start)
-        return VideoFileSource(self.camera_source, start_s=start, frames_csv=opts.frames_csv)
-
     def _pace(self) -> Pace | None:
         """A file camera is released at its own time: the wall clock, unless set."""
-        if self.camera.live:
+        if isinstance(self.camera, CameraDeviceSource) or self.options.pace is not None:
             return self.options.pace
-        if self.options.pace is not None:
-            return self.options.pace
-        start = getattr(self.camera, "start_s", time.time())
+        start = self.camera.start_s
         return Pace(1.0, t0=start, wall0=start)
 
     def run(self) -> DaemonSummary:

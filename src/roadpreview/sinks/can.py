@@ -10,6 +10,7 @@ Per alert ``RP_ALERT`` then ``RP_ALERT_DETAIL`` as it is emitted, per confirmati
 from __future__ import annotations
 
 import logging
+from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -28,41 +29,37 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-class CanSink(Sink):
+class CanSink(Sink, ABC):
     """Encodes the output; subclasses put each frame somewhere (`_emit`)."""
 
     def __init__(self, *, detector: str = "two-axle") -> None:
         self.encoders = OutputEncoders(detector=detector)
         self.frames_out = 0  #: CAN frames emitted
 
-    def _emit(self, msg: can.Message) -> None:
-        raise NotImplementedError
+    @abstractmethod
+    def _emit(self, msg: can.Message) -> bool:
+        """Put one frame out; False if it could not be (counted by the subclass)."""
 
     def _emit_all(self, msgs: Sequence[can.Message]) -> None:
         for msg in msgs:
-            self._emit(msg)
+            self.frames_out += self._emit(msg)
 
     def _alerts(self, t_s: float, alerts: Sequence[Alert]) -> None:
         for a in alerts:
-            self._emit_all(self.encoders.alert_frames(a, timestamp=self._stamp(t_s)))
+            self._emit_all(self.encoders.alert_frames(a, timestamp=t_s))
 
     def _confirmations(
         self, t_s: float, confirmations: Sequence[ConfirmationResult], status: Status
     ) -> None:
-        for c in confirmations:
-            msg = self.encoders.confirm.encode(c, status.precision, timestamp=self._stamp(t_s))
-            self._emit(msg)
-
-    def _stamp(self, t_s: float) -> float:
-        """The time stamp of a frame emitted for pipeline time ``t_s``."""
-        return t_s
+        encode = self.encoders.confirm.encode
+        self._emit_all([encode(c, status.precision, timestamp=t_s) for c in confirmations])
 
     def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
         self._alerts(result.t, result.alerts)
         self._confirmations(result.t, result.confirmations, status)
 
     def on_status(self, t_s: float, status: Status) -> None:
-        self._emit_all(self.encoders.status_frames(status, timestamp=self._stamp(t_s)))
+        self._emit_all(self.encoders.status_frames(status, timestamp=t_s))
 
     def on_flush(self, t_s: float, alerts: Sequence[Alert], status: Status) -> None:
         self._alerts(t_s, alerts)
@@ -75,9 +72,9 @@ class CanMemorySink(CanSink):
         super().__init__(detector=detector)
         self.messages: list[can.Message] = []
 
-    def _emit(self, msg: can.Message) -> None:
+    def _emit(self, msg: can.Message) -> bool:
         self.messages.append(msg)
-        self.frames_out += 1
+        return True
 
 
 class CanLogSink(CanSink):
@@ -89,9 +86,9 @@ class CanLogSink(CanSink):
         self.path = Path(path)
         self.writer = CanLogWriter(self.path)
 
-    def _emit(self, msg: can.Message) -> None:
+    def _emit(self, msg: can.Message) -> bool:
         self.writer.write(msg)
-        self.frames_out += 1
+        return True
 
     def close(self, summary: RunSummary) -> None:
         self.writer.close()
@@ -113,11 +110,10 @@ class CanBusSink(CanSink):
         super().__init__(detector=detector)
         self.bus = bus
         self.send_errors = 0  #: frames the bus refused
-        self.alerts_sent = 0
         self.record = CanLogWriter(record) if record is not None else None
         self._last: tuple[float, Status] | None = None  # the newest time and status seen
 
-    def _emit(self, msg: can.Message) -> None:
+    def _emit(self, msg: can.Message) -> bool:
         try:
             self.bus.send(msg)
         except can.CanError as exc:
@@ -128,14 +124,10 @@ class CanBusSink(CanSink):
                 self.send_errors,
                 str(exc),
             )
-            return
-        self.frames_out += 1
+            return False
         if self.record is not None:
             self.record.write(msg)
-
-    def _alerts(self, t_s: float, alerts: Sequence[Alert]) -> None:
-        super()._alerts(t_s, alerts)
-        self.alerts_sent += len(alerts)
+        return True
 
     def _note(self, t_s: float, status: Status) -> None:
         t_last = self._last[0] if self._last is not None else t_s

@@ -262,17 +262,23 @@ def camera_kind(source: str) -> str:
 
 
 def open_camera(
-    source: str, *, start_s: float | None = None, reopen_s: float = 1.0, fps: float = 10.0
+    source: str,
+    *,
+    start_s: float | None = None,
+    frames_csv: str | Path | None = None,
+    reopen_s: float = 1.0,
+    fps: float = 10.0,
 ) -> VideoFileSource | CameraDeviceSource | ImageSequenceSource:
     """The camera source for ``source`` (`camera_kind`). A file or an image folder starts
-    at ``start_s`` (default: now, so that it lines up with a live bus)."""
+    at ``start_s`` (default: now, so that it lines up with a live bus), its frames timed
+    by ``frames_csv`` when given."""
     kind = camera_kind(source)
     if kind in ("device", "stream"):
         return CameraDeviceSource(source, reopen_s=reopen_s)
     start = time.time() if start_s is None else start_s
     if kind == "images":
-        return ImageSequenceSource(source, fps=fps, start_s=start)
-    return VideoFileSource(source, start_s=start)
+        return ImageSequenceSource(source, fps=fps, start_s=start, frames_csv=frames_csv)
+    return VideoFileSource(source, start_s=start, frames_csv=frames_csv)
 
 
 __all__ = [
