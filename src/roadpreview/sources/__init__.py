@@ -19,9 +19,10 @@ from __future__ import annotations
 
 import heapq
 from collections.abc import Iterable, Iterator
+from dataclasses import replace
 from typing import Protocol, runtime_checkable
 
-from roadpreview.types import CameraFrame, Sample
+from roadpreview.types import CameraFrame, InputSample, Sample
 
 
 @runtime_checkable
@@ -50,9 +51,14 @@ def merge_key(sample: Sample) -> tuple[float, int]:
     return (sample.t_s, 1 if isinstance(sample, CameraFrame) else 0)
 
 
+def shifted(sample: InputSample, offset_s: float) -> InputSample:
+    """``sample`` moved by ``offset_s`` onto the pipeline's clock (itself when 0)."""
+    return sample if offset_s == 0.0 else replace(sample, t_s=sample.t_s + offset_s)
+
+
 def merge_sources(sources: Iterable[Iterable[Sample]]) -> Iterator[Sample]:
     """All samples of file sources in time order, lazily (one pending sample per source)."""
     return heapq.merge(*sources, key=merge_key)
 
 
-__all__ = ["Source", "merge_key", "merge_sources"]
+__all__ = ["Source", "merge_key", "merge_sources", "shifted"]

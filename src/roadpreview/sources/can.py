@@ -13,7 +13,6 @@ import logging
 import math
 import threading
 from collections.abc import Iterator
-from dataclasses import replace
 from pathlib import Path
 
 import can
@@ -24,6 +23,7 @@ from roadpreview.canbus.live import CanReceiver
 from roadpreview.canbus.logio import CanLogReader, read_can_log
 from roadpreview.canbus.mapping import load_mapping
 from roadpreview.errors import InputDataError
+from roadpreview.sources import shifted
 from roadpreview.types import InputSample
 
 log = logging.getLogger(__name__)
@@ -79,14 +79,10 @@ class CanLogSource:
                 continue
             last = msg.timestamp
             for sample in self.decoder.decode(msg):
-                yield sample if self.offset_s == 0.0 else _shifted(sample, self.offset_s)
+                yield shifted(sample, self.offset_s)
 
     def close(self) -> None:
         self._closed = True
-
-
-def _shifted(sample: InputSample, offset_s: float) -> InputSample:
-    return replace(sample, t_s=sample.t_s + offset_s)
 
 
 class CanBusSource:

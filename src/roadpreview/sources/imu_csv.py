@@ -8,7 +8,8 @@ from pathlib import Path
 
 from roadpreview.canbus.imu_csv import imu_samples, read_imu_csv
 from roadpreview.errors import InputDataError
-from roadpreview.types import ImuSample
+from roadpreview.sources import shifted
+from roadpreview.types import InputSample
 
 
 class ImuCsvSource:
@@ -29,11 +30,11 @@ class ImuCsvSource:
     def errors(self) -> int:
         return 0  # the reader refuses a file without a valid row and logs skipped rows
 
-    def __iter__(self) -> Iterator[ImuSample]:
+    def __iter__(self) -> Iterator[InputSample]:
         for s in imu_samples(read_imu_csv(self.path), source=str(self.path)):
             if self._closed:
                 return
-            yield ImuSample(s.t_s + self.offset_s, s.rates_rad_s, s.accel_m_s2, s.source)
+            yield shifted(s, self.offset_s)
 
     def close(self) -> None:
         self._closed = True
