@@ -7,6 +7,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from roadpreview.cli._input_args import add_input_arguments, inputs_from_args
 from roadpreview.cli._pipeline_args import add_pipeline_arguments, pipeline_config
 
 
@@ -20,26 +21,15 @@ def add_subparser(sub: Any) -> None:
             "frames.csv, plots.png, summary.json (and annotated.mp4 with --annotate)."
         ),
     )
-    p.add_argument("input", type=Path, help="a recording folder, or a video file")
+    add_input_arguments(p)
     p.add_argument("--out", type=Path, required=True, help="output folder")
     add_pipeline_arguments(p)
-    p.add_argument("--camera", type=Path, help="camera calibration (TOML), for a video input")
-    p.add_argument("--can", type=Path, action="append", default=[], help="a CAN log (repeatable)")
-    p.add_argument("--imu-csv", type=Path, help="an IMU CSV (smartphone style)")
-    p.add_argument("--frames-csv", type=Path, help="frame time stamps (frame,t_s)")
-    p.add_argument(
-        "--video-start",
-        type=float,
-        default=None,
-        help="time of the first frame on the log clock (s); default: first CAN frame",
-    )
     p.add_argument(
         "--pace",
         type=float,
         default=None,
         metavar="RATE",
-        help="play at RATE times the recorded speed (1: real time); default: as fast as"
-        " possible",
+        help="play at RATE times the recorded speed (1: real time); default: as fast as possible",
     )
     p.add_argument(
         "--truth",
@@ -52,32 +42,13 @@ def add_subparser(sub: Any) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from roadpreview.apps.replay import (
-        ReplayInputs,
         format_modes,
         print_progress,
         replay,
     )
-    from roadpreview.camera import CameraModel
-    from roadpreview.errors import ConfigError
     from roadpreview.loop import Pace, install_signal_handlers
 
-    if args.input.is_dir():
-        inputs = ReplayInputs.from_recording(args.input)
-        if not args.truth:
-            inputs.truth_events = None
-    else:
-        if args.camera is None:
-            raise ConfigError("--camera: a camera calibration is needed for a video input")
-        inputs = ReplayInputs(
-            video=args.input,
-            camera=CameraModel.load(args.camera),
-            can_logs=list(args.can),
-            imu_csv=args.imu_csv,
-            frames_csv=args.frames_csv,
-            video_start_s=args.video_start,
-        )
-        if args.truth:
-            raise ConfigError("--truth needs a simulator recording folder")
+    inputs = inputs_from_args(args, truth=args.truth)
     config = pipeline_config(args)
     stop = threading.Event()
     handlers = install_signal_handlers(stop)  # Ctrl-C / SIGTERM: stop, flush, close outputs
