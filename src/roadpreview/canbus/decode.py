@@ -255,7 +255,9 @@ class CanInputDecoder:
         if any(q in values for q in _RATES + _ACCEL):
             rates = tuple(values.get(q, math.nan) for q in _RATES)
             accel = tuple(values.get(q, math.nan) for q in _ACCEL)
-            out.append(ImuSample(t, rates, accel, message.name))  # type: ignore[arg-type]
+            sample = ImuSample(t, rates, accel, message.name)  # type: ignore[arg-type]
+            mount = self.mapping.mount  # a calibrated IMU: into the body axes, camera clock
+            out.append(sample if mount is None else mount.apply_sample(sample))
         if "speed" in values:
             out.append(SpeedSample(t, values["speed"], message.name))
         return out

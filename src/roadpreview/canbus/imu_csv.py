@@ -10,7 +10,8 @@ The file starts with optional ``#`` comment lines, then the header
 ``gyro_y > 0`` is nose DOWN) and specific force in m/s² (gravity included,
 +9.81 on z at rest). Bad rows are logged with file and line and skipped.
 `imu_samples` turns the table into the `ImuSample` stream the CAN decoder
-also produces, in roadpreview's conventions. ``roadpreview.sim.canlog``
+also produces, in roadpreview's conventions (through an `ImuMount` when the
+phone does not lie with its axes along the car's). ``roadpreview.sim.canlog``
 writes these files and re-exports the reader.
 """
 
@@ -22,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from roadpreview.canbus.samples import RATE_SIGNS, ImuMeasurements
+from roadpreview.canbus.samples import RATE_SIGNS, ImuMeasurements, ImuMount
 from roadpreview.errors import InputDataError
 from roadpreview.types import ImuSample
 
@@ -105,8 +106,14 @@ def read_imu_csv(path: str | Path) -> ImuMeasurements:
     return ImuMeasurements(table[:, 0].copy(), table[:, 1:4].copy(), table[:, 4:7].copy())
 
 
-def imu_samples(meas: ImuMeasurements, source: str = "imu.csv") -> list[ImuSample]:
-    """The rows as `ImuSample` in roadpreview's conventions (pitch nose up +: -gyro_y)."""
+def imu_samples(
+    meas: ImuMeasurements, source: str = "imu.csv", *, mount: ImuMount | None = None
+) -> list[ImuSample]:
+    """The rows as `ImuSample` in roadpreview's conventions (pitch nose up +: -gyro_y);
+    with a ``mount`` (a calibration) first turned into the car's axes and the camera's
+    clock."""
+    if mount is not None:
+        meas = mount.apply(meas)
     rates = meas.gyro_rad_s * RATE_SIGNS
     return [
         ImuSample(

@@ -26,6 +26,11 @@ that any car's DBC can feed roadpreview. Shipped mappings are
     [quantities.pitch_rate]
     missing = "no pitch rate on this car's powertrain bus"
 
+An optional ``[mount]`` table (``roadpreview calibrate`` writes it,
+`roadpreview.canbus.samples.ImuMount`) says how the IMU lies in the car: the
+quantities above are then the IMU's own axes, turned into the body's by
+``rotation`` (body <- IMU), and ``time_offset_s`` is taken off their stamps.
+
 Every quantity of `QUANTITIES` must be listed, mapped or declared
 ``missing`` with the reason, so a missing signal is a statement, not an
 oversight. The value is converted to SI and to roadpreview's conventions
@@ -50,6 +55,7 @@ from cantools.database.can import Database, Signal
 from cantools.database.can import Message as MessageDef
 
 from roadpreview._tomlio import load_toml
+from roadpreview.canbus.samples import ImuMount
 from roadpreview.configtools import from_mapping, param
 from roadpreview.errors import ConfigError
 
@@ -181,6 +187,8 @@ class InputMapping:
     quantities: dict[str, QuantitySpec]
     messages: dict[str, MessageOptions] = field(default_factory=dict)
     source: str = "<mapping>"
+    #: ``[mount]``: the IMU's rotation into the body axes and its clock offset (calibrated)
+    mount: ImuMount | None = None
 
     def integrity_of(self, message: str) -> str:
         """The integrity check of ``message``."""
@@ -225,10 +233,10 @@ def _check_quantity(name: str, spec: QuantitySpec, where: str) -> None:
 
 def parse_mapping(data: Mapping[str, Any], source: str = "<mapping>") -> InputMapping:
     """Build an `InputMapping` from parsed TOML; `ConfigError` names ``source`` and the key."""
-    unknown = sorted(set(data) - {"mapping", "messages", "quantities"})
+    unknown = sorted(set(data) - {"mapping", "messages", "quantities", "mount"})
     if unknown:
         raise ConfigError(
-            f"{source}: unknown table [{unknown[0]}] (known: mapping, messages, quantities)"
+            f"{source}: unknown table [{unknown[0]}] (known: mapping, messages, quantities, mount)"
         )
     header = from_mapping(MappingHeader, data.get("mapping", {}), source=source, where="mapping")
     messages: dict[str, MessageOptions] = {}
@@ -256,7 +264,10 @@ def parse_mapping(data: Mapping[str, Any], source: str = "<mapping>") -> InputMa
             f"{source}: quantity {absent[0]} is not in the mapping; add [quantities.{absent[0]}]"
             ' with its message and signal, or with missing = "why this car has none"'
         )
-    return InputMapping(header=header, quantities=quantities, messages=messages, source=source)
+    mount = ImuMount.from_dict(data["mount"], source=source) if "mount" in data else None
+    return InputMapping(
+        header=header, quantities=quantities, messages=messages, source=source, mount=mount
+    )
 
 
 def packaged_mapping_path(name: str) -> Path:

@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "run": "roadpreview.cli.run",
     "bench": "roadpreview.cli.bench",
     "evaluate": "roadpreview.cli.evaluate",
+    "calibrate": "roadpreview.cli.calibrate",
 }
 
 

@@ -10,6 +10,9 @@ Axes and signs (``docs/method.md``, ``docs/can-interface.md``):
 * The IMU's axes are the body axes of ISO 8855: x forward, y LEFT, z UP,
   right-handed. ``gyro_rad_s`` and ``accel_m_s2`` of the samples are in
   these axes, as the silicon measures them (and as the IMU CSV stores them).
+  A chip mounted rotated (``ImuConfig.mount_ypr_deg``) measures in its own
+  axes instead: ``v_chip = M^T v_body`` with M = `ImuConfig.mount_rotation`
+  (what ``roadpreview calibrate`` estimates and a mapping's ``[mount]`` undoes).
 * roadpreview's rates are [roll rate, pitch rate, yaw rate] with roll
   positive left side up, pitch positive NOSE UP, yaw positive turning left.
   Roll and yaw rates are +omega_x and +omega_z; the pitch rate is
@@ -32,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import cumulative_trapezoid
+from scipy.spatial.transform import Rotation
 
 from roadpreview.canbus.samples import RATE_SIGNS, ImuMeasurements
 from roadpreview.configtools import check_ranges, param
@@ -118,6 +122,12 @@ class ImuConfig:
     gravity_m_s2: float = param(
         STANDARD_GRAVITY_M_S2, unit="m/s²", ge=9.7, le=9.9, help="local gravity (standard gravity)"
     )
+    mount_ypr_deg: tuple[float, float, float] = param(
+        (0.0, 0.0, 0.0),
+        unit="deg",
+        help="how the chip sits in the body: yaw, pitch, roll of its axes (intrinsic z-y-x,"
+        " right-handed about ISO 8855's axes, so +pitch tips the chip's x down); 0: aligned",
+    )
 
     def validate(self, where: str = "ImuConfig") -> None:
         """Check the ranges and the relations between fields; raise `ConfigError`."""
@@ -129,6 +139,12 @@ class ImuConfig:
             bias = getattr(self, f"{name}_bias")
             if len(bias) != 3 or not all(math.isfinite(float(b)) for b in bias):
                 raise ConfigError(f"{where}.{name}_bias = {bias!r}: must be 3 finite numbers")
+        if len(self.mount_ypr_deg) != 3 or not all(
+            math.isfinite(float(a)) for a in self.mount_ypr_deg
+        ):
+            raise ConfigError(
+                f"{where}.mount_ypr_deg = {self.mount_ypr_deg!r}: must be 3 finite angles"
+            )
         if self.timestamp_jitter_s > 0.1 / self.rate_hz:
             raise ConfigError(
                 f"{where}.timestamp_jitter_s = {self.timestamp_jitter_s} s: must be <= 0.1 /"
@@ -204,6 +220,12 @@ class ImuConfig:
             accel_range=1e6,
             accel_lsb=0.0,
         )
+
+    @property
+    def mount_rotation(self) -> Array:
+        """(3, 3) rotation taking vectors in the chip's axes to the body's (ISO 8855)."""
+        rot: Array = Rotation.from_euler("ZYX", self.mount_ypr_deg, degrees=True).as_matrix()
+        return rot
 
     @property
     def gyro_noise_std(self) -> float:
@@ -484,10 +506,12 @@ def simulate_imu(
     t_true = _sample_grid(tt, cfg.rate_hz, "simulate_imu")
     m = len(t_true)
 
-    gyro_truth_fine = omega * RATE_SIGNS  # roadpreview rates -> ISO body rates
+    # roadpreview rates -> ISO body rates -> the chip's axes (``v_chip = M^T v_body``)
+    mount = cfg.mount_rotation
+    gyro_truth_fine = (omega * RATE_SIGNS) @ mount
     specific_force_world = acc_w + np.array([0.0, 0.0, cfg.gravity_m_s2])
     rot = rotation_body_to_world(att)
-    specific_force_body = np.einsum("nji,nj->ni", rot, specific_force_world)
+    specific_force_body = np.einsum("nji,nj->ni", rot, specific_force_world) @ mount
 
     true_gyro = _resample(tt, gyro_truth_fine, t_true, period, cfg.sampling)
     true_accel = _resample(tt, specific_force_body, t_true, period, cfg.sampling)

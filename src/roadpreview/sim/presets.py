@@ -15,6 +15,7 @@ differ from the ``wild`` set's; no detector is tuned on them.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -120,6 +121,18 @@ def wild(seed: int = 0, *, duration_s: float = 60.0) -> ScenarioConfig:
     # a smartphone-grade IMU whose clock is off by an unknown 0-80 ms (CAN / app latency)
     imu = replace(ImuConfig.smartphone(), time_offset_s=round(float(rng.uniform(0.0, 0.08)), 4))
     return ScenarioConfig(name="wild", seed=seed, motion=motion, imu_preset="custom", imu=imu)
+
+
+def mounted_imu(seed: int = 0, *, duration_s: float = 60.0) -> ScenarioConfig:
+    """A ``wild`` drive for self-calibration (``roadpreview calibrate``): the phone IMU lies
+    rotated in its holder (90 deg yaw, 5 deg pitch) with its clock 60 ms late, and the
+    camera looks 2 deg down and 1 deg to the left of the direction of travel."""
+    cfg = wild(seed, duration_s=duration_s)
+    imu = replace(ImuConfig.smartphone(), time_offset_s=0.060, mount_ypr_deg=(90.0, 5.0, 0.0))
+    t = np.array([math.tan(math.radians(1.0)), -math.tan(math.radians(2.0)), 1.0])
+    t /= np.linalg.norm(t)
+    camera = replace(cfg.camera, forward=(float(t[0]), float(t[1]), float(t[2])))
+    return replace(cfg, name="mounted-imu", imu=imu, camera=camera)
 
 
 def texture_loss(seed: int = 0, *, duration_s: float = 60.0) -> ScenarioConfig:
@@ -719,6 +732,7 @@ PRESETS: dict[str, Callable[[int], ScenarioConfig]] = {
     "wild": wild,
     "texture-loss": texture_loss,
     "demo": demo,
+    "mounted-imu": mounted_imu,
 }
 
 

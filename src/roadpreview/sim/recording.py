@@ -135,6 +135,7 @@ def write_recording(
         "can_t0_unix_s": DEFAULT_T0_UNIX_S,
         "imu_time_offset_s": cfg.imu_config.time_offset_s,
         "imu_rate_hz": cfg.imu_config.rate_hz,
+        "imu_mount_ypr_deg": list(cfg.imu_config.mount_ypr_deg),
         "n_events": len(events),
         "n_lead_hits": sum(1 for e in drive.events if e.lead_hits),
         "n_hard": sum(1 for e in drive.events if e.hard),
