@@ -314,3 +314,20 @@ def test_the_repetition_comes_from_the_configuration() -> None:
     with pytest.raises(ValueError, match="period_s"):
         RepetitionConfig(period_s=0.0)
     assert math.isfinite(rep.pass_margin_m)
+
+
+def test_a_confirmation_before_the_end_frees_the_id_at_the_end() -> None:
+    """Creeping over a long anomaly, the ego's check (RP_CONFIRM) can come before the rear
+    axle has left it: then the id is free as soon as the ends are out; without the check it
+    waits for it (at most ``hold_s``)."""
+    for confirm_early, free_id in ((True, 1), (False, 2)):
+        rep = AlertRepeater()
+        rep.frame(0.0, 10.0, [_alert(1, -0.1, 0.0, 5.0)])
+        if confirm_early:
+            rep.release(1)
+        out: list[AlertSend | AlertEnd] = []
+        for k in range(1, 60):  # 2 s at 10 m/s: passed after about 0.8 s, 3 ends by 1.1 s
+            out += rep.frame(k / FPS, 10.0)
+        assert sum(isinstance(o, AlertEnd) for o in out) == CFG.end_repeats
+        rep.frame(2.0, 10.0, [_alert(257, 1.9, 2.0, 60.0)])
+        assert rep.can_id(257) == free_id

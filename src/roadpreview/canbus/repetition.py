@@ -135,6 +135,7 @@ class _Active:
     next_t: float
     remaining_m: float  #: front axle to the anomaly as of the last frame (NaN: unknown)
     sends: int = 0
+    confirmed: bool = False  #: its RP_CONFIRM went out already
     ended: tuple[EndReason, EndCause] | None = None
     ends_left: int = 0
     t_end: float = math.nan
@@ -215,6 +216,9 @@ class AlertRepeater:
     def release(self, alert_id: int) -> None:
         """The alert's ``RP_CONFIRM`` went out: its id may be used again after its end."""
         self._held.pop(alert_id, None)
+        a = self._active.get(alert_id)
+        if a is not None:
+            a.confirmed = True
 
     def frame(
         self, t_s: float, speed_mps: float | None, alerts: Sequence[Alert] = ()
@@ -223,9 +227,8 @@ class AlertRepeater:
         step = self._odo.push(t_s, speed_mps)
         self.t = max(self.t, t_s)
         out: list[AlertSend | AlertEnd] = []
-        for a in self._active.values():
-            if a.ended is None:
-                a.remaining_m -= step
+        for a in self._active.values():  # (an ended one too: its end frames say where)
+            a.remaining_m -= step
         for alert in alerts:
             out += self._add(alert, t_s)
         for a in list(self._active.values()):
@@ -336,7 +339,8 @@ class AlertRepeater:
         for alert_id, a in list(self._active.items()):
             if a.ended is not None and a.ends_left == 0:
                 del self._active[alert_id]
-                self._held[alert_id] = (a.can_id, a.t_end)
+                if not a.confirmed:
+                    self._held[alert_id] = (a.can_id, a.t_end)
         for alert_id, (_, t_end) in list(self._held.items()):
             if t - t_end > self.config.hold_s:
                 del self._held[alert_id]
