@@ -19,6 +19,7 @@ from roadpreview.canbus.dbc import (
     RESERVED_OUTPUT_IDS,
     RP_ALERT,
     RP_ALERT_DETAIL,
+    RP_ALERT_END,
     RP_CONFIRM,
     RP_ROAD_STATUS,
     RP_STATUS,
@@ -75,9 +76,13 @@ def db() -> Database:
 def imu_samples() -> ImuSamples:
     t = np.arange(0.0, 3.0005, 0.001)
     zeros = np.zeros_like(t)
-    omega = np.column_stack([
-        0.3 * np.sin(3 * t), 0.5 * np.sin(5 * t), 1.2 * np.sin(1.1 * t),  # up to ~70 deg/s
-    ])
+    omega = np.column_stack(
+        [
+            0.3 * np.sin(3 * t),
+            0.5 * np.sin(5 * t),
+            1.2 * np.sin(1.1 * t),  # up to ~70 deg/s
+        ]
+    )
     acc = np.column_stack([2 * np.sin(t), 3 * np.cos(2 * t), 4 * np.sin(7 * t)])
     att = np.column_stack([0.05 * np.sin(t), 0.03 * np.sin(2 * t), zeros])
     return simulate_imu(t, omega, acc, att, ImuConfig.smartphone(), np.random.default_rng(11))
@@ -116,6 +121,7 @@ def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> Non
         RP_ROAD_STATUS: 0x202,
         RP_ALERT_DETAIL: 0x203,
         RP_CONFIRM: 0x204,
+        RP_ALERT_END: 0x205,
     }
     assert {m.name: m.frame_id for m in db.messages} == inputs | outputs
     for m in db.messages:
@@ -144,7 +150,10 @@ def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> Non
     for cyclic in (RP_STATUS, RP_ROAD_STATUS):
         assert db.get_message_by_name(cyclic).cycle_time == 100
         assert db.get_message_by_name(cyclic).send_type == "Cyclic"
-    for event in (RP_ALERT, RP_ALERT_DETAIL, RP_CONFIRM):
+    for repeated in (RP_ALERT, RP_ALERT_DETAIL):  # every 100 ms while an alert is active
+        assert db.get_message_by_name(repeated).cycle_time == 100
+        assert db.get_message_by_name(repeated).send_type == "IfActive"
+    for event in (RP_CONFIRM, RP_ALERT_END):
         assert db.get_message_by_name(event).send_type == "Event"
         assert not db.get_message_by_name(event).cycle_time
 
@@ -158,30 +167,38 @@ def test_the_top_comment_lists_every_output_id() -> None:
         (RP_ROAD_STATUS, 0x202),
         (RP_ALERT_DETAIL, 0x203),
         (RP_CONFIRM, 0x204),
+        (RP_ALERT_END, 0x205),
     ):
         assert f"0x{fid:03X} {name}" in top, name
 
 
 # the output layouts a chassis ECU is built against: (start, length, signed, scale, min, max,
 # raw value meaning "not available" or None)
-OUTPUT_LAYOUTS = {
+OUTPUT_LAYOUTS: dict[str, dict[str, tuple[int, int, bool, float, float, float, int | None]]] = {
     RP_ALERT: {
         "AlertSide": (12, 2, False, 1, 0, 3, None),
         "AlertFusionMode": (14, 2, False, 1, 0, 3, None),
         "AlertId": (16, 8, False, 1, 0, 255, None),
-        "AlertDistance": (24, 10, False, 0.2, 0, 204.4, 1023),
-        "AlertTimeToArrival": (34, 10, False, 0.02, 0, 20.44, 1023),
+        "AlertDistance": (24, 10, True, 0.2, -102.2, 102.2, -512),
+        "AlertTimeToArrival": (34, 10, True, 0.02, -10.22, 10.22, -512),
         "AlertHeight": (44, 9, True, 2, -510, 510, -256),
-        "AlertConfidence": (53, 6, False, 2, 0, 100, 63),
-        "AlertEventAge": (59, 5, False, 0.1, 0, 3.0, 31),
+        "AlertLength": (53, 6, False, 0.1, 0, 6.2, 63),
+        "AlertConfidence": (59, 5, False, 4, 0, 100, 31),
     },
     RP_ALERT_DETAIL: {
         "DetailDetector": (12, 2, False, 1, 0, 1, None),
         "AlertId": (16, 8, False, 1, 0, 255, None),
         "AlertHeightStd": (24, 6, False, 2, 0, 124, 63),
-        "AlertLength": (30, 8, False, 0.05, 0, 12.7, 255),
-        "AlertScore": (38, 8, False, 0.2, 0, 50.8, 255),
-        "AlertLeadSpeed": (46, 8, False, 0.5, 0, 127, 255),
+        "AlertScore": (30, 8, False, 0.2, 0, 50.8, 255),
+        "AlertLeadSpeed": (38, 8, False, 0.5, 0, 127, 255),
+        "AlertCrossingAge": (46, 8, False, 0.1, 0, 25.4, 255),
+    },
+    RP_ALERT_END: {
+        "EndReason": (12, 2, False, 1, 0, 1, None),
+        "EndCause": (14, 2, False, 1, 0, 3, None),
+        "EndAlertId": (16, 8, False, 1, 0, 255, None),
+        "EndAlertSends": (24, 8, False, 1, 0, 255, None),
+        "EndDistance": (32, 10, True, 0.2, -102.2, 102.2, -512),
     },
     RP_CONFIRM: {
         "ConfirmOutcome": (12, 2, False, 1, 0, 2, None),

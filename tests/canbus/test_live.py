@@ -31,6 +31,8 @@ from roadpreview.canbus import (
     read_can_log,
     replay,
 )
+from roadpreview.canbus.output import ReceivedAlertEnd
+from roadpreview.canbus.repetition import EndReason
 from roadpreview.errors import ConfigError
 from roadpreview.loop import RunSummary
 from roadpreview.pipeline import FrameResult
@@ -80,10 +82,16 @@ def _of(kind: type[T], got: list[ReceivedOutput]) -> list[T]:
 
 
 def _result(
-    t: float, alerts: Sequence[Alert] = (), confirms: Sequence[ConfirmationResult] = ()
+    t: float,
+    alerts: Sequence[Alert] = (),
+    confirms: Sequence[ConfirmationResult] = (),
+    speed: float | None = 15.0,
 ) -> FrameResult:
     """The part of a `FrameResult` the CAN sinks read."""
-    return cast(FrameResult, SimpleNamespace(t=t, alerts=tuple(alerts), confirmations=confirms))
+    return cast(
+        FrameResult,
+        SimpleNamespace(t=t, alerts=tuple(alerts), confirmations=confirms, ego_speed_mps=speed),
+    )
 
 
 def test_alerts_and_status_from_one_bus_object_to_another(
@@ -155,22 +163,27 @@ def test_alerts_and_status_from_one_bus_object_to_another(
     sent = list(read_can_log(tmp_path / "sent.asc"))
     assert out.send_errors == 0
     assert [m.arbitration_id for m in sent[:2]] == [0x200, 0x203]  # RP_ALERT, then details
-    first, detail, confirm = got[:3]
+    first, detail, end, confirm = got[:4]
     assert isinstance(first, ReceivedAlert)
     assert first.alert_id == 259 % 256
-    assert first.distance_m == pytest.approx(32.4, abs=0.1)
-    assert first.time_to_arrival_s == pytest.approx(2.16, abs=0.01)
-    assert first.event_age_s == pytest.approx(1.0, abs=0.05)
+    # as of the send: the front axle (0.2 m ahead of the camera) drove 15 m at 15 m/s since
+    # the crossing 1 s before
+    assert first.distance_m == pytest.approx(32.4 - 0.2 - 15.0, abs=0.1)
+    assert first.time_to_arrival_s == pytest.approx((32.4 - 0.2 - 15.0) / 15.0, abs=0.01)
     assert first.height_mm == pytest.approx(-48.0, abs=1.0)
     assert first.side == Side.RIGHT
     assert first.mode == FusionMode.VISUAL_ONLY
-    assert first.confidence == pytest.approx(0.82, abs=0.005)
+    assert first.confidence == pytest.approx(0.82, abs=0.02)  # 4 % steps
     assert isinstance(detail, ReceivedAlertDetail)
     assert detail.alert_id == first.alert_id
     assert detail.detector == "std"
     assert detail.score == pytest.approx(3.4, abs=0.1)
     assert detail.height_std_mm == pytest.approx(12.0, abs=1.0)
-    assert detail.length_m == pytest.approx(0.6, abs=0.025)
+    assert first.length_m == pytest.approx(0.6, abs=0.05)
+    assert detail.crossing_age_s == pytest.approx(1.0, abs=0.05)
+    # 3 s later at 15 m/s the ego is long past the spot: the alert ended before its check
+    assert isinstance(end, ReceivedAlertEnd)
+    assert (end.alert_id, end.reason, end.sends) == (first.alert_id, EndReason.PASSED, 1)
     assert detail.lead_speed_mps == pytest.approx(15.0, abs=0.25 / 3.6)
     assert isinstance(confirm, ReceivedConfirm)
     assert confirm.alert_id == first.alert_id
@@ -181,7 +194,7 @@ def test_alerts_and_status_from_one_bus_object_to_another(
     assert confirm.precision == pytest.approx(0.75, abs=0.005)
     periodic = _of(ReceivedStatus, got)
     roads = _of(ReceivedRoadStatus, got)
-    assert len(got) == 3 + len(periodic) + len(roads)
+    assert len(got) == 4 + len(periodic) + len(roads)
     assert [s.counter for s in periodic[:5]] == list(range(5))
     assert [r.counter for r in roads[:5]] == list(range(5))
     s0 = periodic[0]
@@ -203,8 +216,10 @@ def test_alerts_and_status_from_one_bus_object_to_another(
     assert decoder.problems == {}
     assert decoder.lost == 0
     assert receiver.dropped == 0
-    assert [m.arbitration_id for m in sent[:3]] == [0x200, 0x203, 0x204]
-    assert {m.arbitration_id for m in sent[3:]} == {0x201, 0x202}
+    assert [m.arbitration_id for m in sent[:4]] == [0x200, 0x203, 0x205, 0x204]
+    # the end's two repetitions go out at close (no frame came after it)
+    assert {m.arbitration_id for m in sent[4:]} == {0x201, 0x202, 0x205}
+    assert sum(m.arbitration_id == 0x205 for m in sent) == 3
 
 
 def test_an_unknown_detector_fails_when_the_output_is_built(

@@ -1,5 +1,6 @@
-"""roadpreview's outputs (RP_ALERT, RP_ALERT_DETAIL, RP_CONFIRM, RP_STATUS, RP_ROAD_STATUS):
-cantools (strict) and `OutputDecoder` decode what we encode, E2E counters and CRCs check."""
+"""roadpreview's outputs (RP_ALERT, RP_ALERT_DETAIL, RP_ALERT_END, RP_CONFIRM, RP_STATUS,
+RP_ROAD_STATUS): cantools (strict) and `OutputDecoder` decode what we encode, E2E counters and
+CRCs check."""
 
 from __future__ import annotations
 
@@ -39,6 +40,9 @@ from roadpreview.canbus import (
     read_can_log,
     write_can_log,
 )
+from roadpreview.canbus.dbc import RP_ALERT_END
+from roadpreview.canbus.output import AlertEndEncoder, ReceivedAlertEnd
+from roadpreview.canbus.repetition import AlertEnd, AlertSend, EndCause, EndReason
 from roadpreview.errors import ConfigError
 from roadpreview.types import (
     ISO8608_CLASSES,
@@ -90,8 +94,44 @@ def _random_alerts(n: int, seed: int = 0) -> list[Alert]:
                 mode=FusionMode(int(rng.integers(0, 4))),
                 alert_id=k + 1 + 250 * (k % 3),  # beyond 255 too: sent modulo 256
                 height_std_mm=float(rng.uniform(0, 124)),
-                length_m=float(rng.uniform(0, 12.7)),
+                length_m=float(rng.uniform(0, 6.2)),
                 lead_speed_mps=float(rng.uniform(0, 127)) * KMH,
+            )
+        )
+    return out
+
+
+def _random_sends(n: int, seed: int = 0) -> list[AlertSend]:
+    """The alerts as of a later send: front axle before (or, negative, past) the anomaly."""
+    rng = np.random.default_rng(seed + 100)
+    return [
+        AlertSend(
+            alert=a,
+            can_id=a.alert_id % 256,
+            t_s=a.t_emit_s + float(rng.uniform(0, 5)),
+            distance_m=float(rng.uniform(-102.2, 102.2)),
+            time_to_arrival_s=float(rng.uniform(-10.22, 10.22)),
+            age_s=float(rng.uniform(0, 25.4)),
+            count=int(rng.integers(1, 100)),
+        )
+        for a in _random_alerts(n, seed)
+    ]
+
+
+def _random_ends(n: int, seed: int = 4) -> list[AlertEnd]:
+    rng = np.random.default_rng(seed)
+    out = []
+    for a in _random_alerts(n, seed):
+        passed = bool(rng.integers(0, 2))
+        out.append(
+            AlertEnd(
+                alert=a,
+                can_id=int(rng.integers(0, 256)),
+                t_s=a.t_emit_s + float(rng.uniform(0, 15)),
+                reason=EndReason.PASSED if passed else EndReason.CANCELLED,
+                cause=EndCause.NONE if passed else EndCause(int(rng.integers(1, 4))),
+                sends=int(rng.integers(0, 300)),
+                distance_m=float(rng.uniform(-102.2, 102.2)),
             )
         )
     return out
@@ -161,48 +201,99 @@ def _lsb(db: Database, message: str, signal: str) -> float:
 def test_alerts_decode_with_cantools_to_the_same_values(strict_db: Database) -> None:
     enc = AlertEncoder()
     msg_def = strict_db.get_message_by_name(RP_ALERT)
-    for alert in _random_alerts(300):
-        frame = enc.encode(alert)
+    for send in _random_sends(300):
+        frame = enc.encode(send)
         assert frame.arbitration_id == 0x200
         assert frame.dlc == 8
         assert not frame.is_extended_id
+        assert frame.timestamp == send.t_s
         got = _signals(msg_def.decode(bytes(frame.data), decode_choices=False))
+        alert = send.alert
         want = {
-            "AlertDistance": alert.distance_m,
-            "AlertTimeToArrival": alert.time_to_arrival_s,
+            "AlertDistance": send.distance_m,  # as of this send, signed
+            "AlertTimeToArrival": send.time_to_arrival_s,
             "AlertHeight": alert.height_mm,
+            "AlertLength": alert.length_m,
             "AlertConfidence": 100 * alert.confidence,
-            "AlertEventAge": alert.t_emit_s - alert.t_s,
         }
         for name, value in want.items():
             lsb = _lsb(strict_db, RP_ALERT, name)
             assert got[name] == pytest.approx(value, abs=lsb / 2 + 1e-9), name
         assert got["AlertSide"] == int(alert.side)
         assert got["AlertFusionMode"] == int(alert.mode)
-        assert got["AlertId"] == alert.alert_id % 256
-        assert "AlertSeverity" not in got  # the score is in RP_ALERT_DETAIL now
+        assert got["AlertId"] == send.can_id
+        assert "AlertSeverity" not in got  # the score is in RP_ALERT_DETAIL
+        assert "AlertEventAge" not in got  # the crossing's age too (AlertCrossingAge)
+
+
+def test_an_alert_at_its_emission_has_driven_its_share_at_constant_speed() -> None:
+    """Encoding an `Alert` itself: the front axle (0.2 m ahead of the camera) covered
+    age / TTA of its way since the crossing, and the TTA is counted from the emission."""
+    alert = replace(_random_alerts(1)[0], t_s=10.0, t_emit_s=11.2, distance_m=30.2)
+    alert = replace(alert, time_to_arrival_s=3.0)  # (30.2 - 0.2) m at 10 m/s
+    send = AlertSend.at_emission(alert)
+    assert send.t_s == 11.2
+    assert send.distance_m == pytest.approx(30.0 - 10.0 * 1.2)
+    assert send.time_to_arrival_s == pytest.approx(3.0 - 1.2)
+    assert send.age_s == pytest.approx(1.2)
+    back = OutputDecoder().decode(AlertEncoder().encode(alert))
+    assert isinstance(back, ReceivedAlert)
+    assert back.distance_m == pytest.approx(18.0, abs=0.1)
+    assert back.arrival_t_s == pytest.approx(alert.t_s + 3.0, abs=0.01)  # the same instant
+    still = AlertSend.at_emission(replace(alert, time_to_arrival_s=None))
+    assert still.distance_m == pytest.approx(30.0)  # no speed: as at the crossing
+    assert still.time_to_arrival_s is None
+
+
+def test_alert_ends_decode_with_cantools_to_the_same_values(strict_db: Database) -> None:
+    enc = AlertEndEncoder()
+    msg_def = strict_db.get_message_by_name(RP_ALERT_END)
+    for end in _random_ends(300):
+        frame = enc.encode(end)
+        assert (frame.arbitration_id, frame.dlc, frame.is_extended_id) == (0x205, 8, False)
+        assert frame.timestamp == end.t_s
+        got = _signals(msg_def.decode(bytes(frame.data), decode_choices=False))
+        assert got["EndReason"] == int(end.reason)
+        assert got["EndCause"] == int(end.cause)
+        assert got["EndAlertId"] == end.can_id
+        assert got["EndAlertSends"] == min(end.sends, 255)
+        lsb = _lsb(strict_db, RP_ALERT_END, "EndDistance")
+        assert got["EndDistance"] == pytest.approx(end.distance_m, abs=lsb / 2 + 1e-9)
+    named = _signals(msg_def.decode(bytes(enc.encode(_random_ends(1, seed=9)[0]).data)))
+    assert str(named["EndReason"]) in ("PASSED", "CANCELLED")
+    unknown = replace(end, distance_m=None, reason=EndReason.CANCELLED, cause=EndCause.TIMEOUT)
+    back = OutputDecoder().decode(AlertEndEncoder().encode(unknown))
+    assert isinstance(back, ReceivedAlertEnd)
+    assert back.distance_m is None
+    assert (back.reason, back.cause, back.alert_id) == (
+        EndReason.CANCELLED,
+        EndCause.TIMEOUT,
+        end.can_id,
+    )
 
 
 def test_alert_details_decode_with_cantools_to_the_same_values(strict_db: Database) -> None:
     enc = AlertDetailEncoder()
     msg_def = strict_db.get_message_by_name(RP_ALERT_DETAIL)
-    for k, alert in enumerate(_random_alerts(300, seed=3)):
+    for k, send in enumerate(_random_sends(300, seed=3)):
         detector = ("std", "two-axle")[k % 2]
-        frame = enc.encode(alert, detector)
+        frame = enc.encode(send, detector)
         assert (frame.arbitration_id, frame.dlc, frame.is_extended_id) == (0x203, 8, False)
-        assert frame.timestamp == alert.t_emit_s
+        assert frame.timestamp == send.t_s
         got = _signals(msg_def.decode(bytes(frame.data), decode_choices=False))
+        alert = send.alert
         assert alert.lead_speed_mps is not None
         want = {
             "AlertHeightStd": alert.height_std_mm,
-            "AlertLength": alert.length_m,
             "AlertScore": alert.severity_px,
             "AlertLeadSpeed": alert.lead_speed_mps / KMH,
+            "AlertCrossingAge": send.age_s,
         }
         for name, value in want.items():
             lsb = _lsb(strict_db, RP_ALERT_DETAIL, name)
             assert got[name] == pytest.approx(value, abs=lsb / 2 + 1e-9), name
-        assert got["AlertId"] == alert.alert_id % 256
+        assert got["AlertId"] == send.can_id
+        assert "AlertLength" not in got  # in RP_ALERT itself
         assert got["DetailDetector"] == DETECTOR_CODES[detector]
     assert (
         str(_signals(msg_def.decode(bytes(enc.encode(alert, "std").data)))["DetailDetector"])
@@ -323,7 +414,7 @@ def test_unknown_values_are_signal_not_available_and_large_ones_saturate(
     detail = AlertDetailEncoder()
     alert = Alert(
         t_s=1.0,
-        t_emit_s=9.0,  # 8 s old: beyond 3.0 s
+        t_emit_s=31.0,  # 30 s old: beyond 25.4 s
         distance_m=None,
         time_to_arrival_s=None,
         severity_px=80.0,  # beyond 50.8
@@ -337,45 +428,56 @@ def test_unknown_values_are_signal_not_available_and_large_ones_saturate(
     assert str(got["AlertDistance"]) == NA
     assert str(got["AlertTimeToArrival"]) == NA
     assert str(got["AlertHeight"]) == NA
-    assert got["AlertEventAge"] == pytest.approx(3.0)
+    assert str(got["AlertLength"]) == NA
     assert got["AlertConfidence"] == 100
     assert got["AlertId"] == 7
     assert str(got["AlertSide"]) == "LEFT"
     assert str(got["AlertFusionMode"]) == "IMU_ONLY"
-    assert enc.saturated == {"AlertEventAge": 1}
+    assert enc.saturated == {}
     got = _signals(
         strict_db.get_message_by_name(RP_ALERT_DETAIL).decode(bytes(detail.encode(alert).data))
     )
     assert got["AlertScore"] == pytest.approx(50.8)
-    for name in ("AlertHeightStd", "AlertLength", "AlertLeadSpeed"):
+    assert got["AlertCrossingAge"] == pytest.approx(25.4)
+    for name in ("AlertHeightStd", "AlertLeadSpeed"):
         assert str(got[name]) == NA, name
-    assert detail.saturated == {"AlertScore": 1}
-    # beyond the ranges: heights both ways, std, length, lead speed, confidence
-    big = replace(
-        alert,
-        t_emit_s=0.5,  # before the crossing: not a valid age
-        height_mm=900.0,
-        height_std_mm=300.0,
-        length_m=40.0,
-        lead_speed_mps=60.0,  # 216 km/h
-        confidence=float("nan"),
+    assert detail.saturated == {"AlertScore": 1, "AlertCrossingAge": 1}
+    # beyond the ranges: heights both ways, distance and TTA both ways, std, length, lead
+    # speed, confidence
+    big = AlertSend(
+        alert=replace(
+            alert,
+            height_mm=900.0,
+            height_std_mm=300.0,
+            length_m=40.0,
+            lead_speed_mps=60.0,  # 216 km/h
+            confidence=float("nan"),
+        ),
+        can_id=7,
+        t_s=31.0,
         distance_m=500.0,
         time_to_arrival_s=40.0,
+        age_s=-0.5,  # before the crossing: not a valid age
+        count=1,
     )
     got = _signals(strict_db.get_message_by_name(RP_ALERT).decode(bytes(enc.encode(big).data)))
     assert got["AlertHeight"] == 510
-    assert got["AlertDistance"] == pytest.approx(204.4)
-    assert got["AlertTimeToArrival"] == pytest.approx(20.44)
+    assert got["AlertDistance"] == pytest.approx(102.2)
+    assert got["AlertTimeToArrival"] == pytest.approx(10.22)
+    assert got["AlertLength"] == pytest.approx(6.2)
     assert str(got["AlertConfidence"]) == NA
-    assert str(got["AlertEventAge"]) == NA
-    hole = replace(big, height_mm=-900.0)
+    hole = replace(
+        big, alert=replace(big.alert, height_mm=-900.0), distance_m=-500.0, time_to_arrival_s=-40.0
+    )
     got = _signals(strict_db.get_message_by_name(RP_ALERT).decode(bytes(enc.encode(hole).data)))
     assert got["AlertHeight"] == -510
+    assert got["AlertDistance"] == pytest.approx(-102.2)
+    assert got["AlertTimeToArrival"] == pytest.approx(-10.22)
     got = _signals(
         strict_db.get_message_by_name(RP_ALERT_DETAIL).decode(bytes(detail.encode(big).data))
     )
     assert got["AlertHeightStd"] == 124
-    assert got["AlertLength"] == pytest.approx(12.7)
+    assert str(got["AlertCrossingAge"]) == NA
     assert got["AlertLeadSpeed"] == 127
     status = StatusEncoder().encode(Status(mode=FusionMode.DEGRADED))
     got = _signals(strict_db.get_message_by_name(RP_STATUS).decode(bytes(status.data)))
@@ -478,6 +580,8 @@ def test_enum_values_on_can_match_the_code(strict_db: Database) -> None:
         (RP_STATUS, "StatusFusionMode", FusionMode),
         (RP_ALERT, "AlertSide", Side),
         (RP_CONFIRM, "ConfirmOutcome", Confirmation),
+        (RP_ALERT_END, "EndReason", EndReason),
+        (RP_ALERT_END, "EndCause", EndCause),
     ):
         choices = strict_db.get_message_by_name(message).get_signal_by_name(signal).choices
         assert choices is not None
@@ -511,7 +615,17 @@ def test_e2e_counters_advance_and_crcs_check_with_autosar_e2e(strict_db: Databas
     rframes = [road.encode(s) for s in statuses]
     assert [f.data[1] & 0x0F for f in sframes] == [k % 15 for k in range(20)]
     assert [f.data[1] & 0x0F for f in rframes] == [k % 15 for k in range(20)]
-    ids = {0x200: alerts, 0x201: sframes, 0x202: rframes, 0x203: details, 0x204: confirms}
+    end_enc = AlertEndEncoder()
+    ends = [end_enc.encode(e) for e in _random_ends(20)]
+    assert [f.data[1] & 0x0F for f in ends] == [k % 15 for k in range(20)]
+    ids = {
+        0x200: alerts,
+        0x201: sframes,
+        0x202: rframes,
+        0x203: details,
+        0x204: confirms,
+        0x205: ends,
+    }
     for data_id, own in ids.items():
         for f in own:
             assert f.arbitration_id == data_id
@@ -541,20 +655,21 @@ def test_a_corrupted_frame_fails_the_check_and_is_dropped_by_the_receiver() -> N
 
 
 def test_receiver_gets_back_what_was_sent() -> None:
-    alert = _random_alerts(1, seed=4)[0]
-    got = OutputDecoder().decode(AlertEncoder().encode(alert))
+    send = _random_sends(1, seed=4)[0]
+    alert = send.alert
+    got = OutputDecoder().decode(AlertEncoder().encode(send))
     assert isinstance(got, ReceivedAlert)
-    assert got.alert_id == alert.alert_id % 256
-    assert got.distance_m == pytest.approx(alert.distance_m, abs=0.1)
-    assert got.time_to_arrival_s == pytest.approx(alert.time_to_arrival_s, abs=0.01)
-    assert got.event_age_s == pytest.approx(alert.t_emit_s - alert.t_s, abs=0.05)
+    assert got.t_rx_s == send.t_s
+    assert got.alert_id == send.can_id
+    assert got.distance_m == pytest.approx(send.distance_m, abs=0.1)
+    assert got.time_to_arrival_s == pytest.approx(send.time_to_arrival_s, abs=0.01)
     assert got.height_mm == pytest.approx(alert.height_mm, abs=1.0)
-    assert got.confidence == pytest.approx(alert.confidence, abs=0.005)
+    assert got.length_m == pytest.approx(alert.length_m, abs=0.05)
+    assert got.confidence == pytest.approx(alert.confidence, abs=0.02)
     assert got.side == alert.side
     assert got.mode == alert.mode
     assert got.time_to_arrival_s is not None
-    assert got.event_age_s is not None
-    assert got.time_left_s == pytest.approx(got.time_to_arrival_s - got.event_age_s)
+    assert got.arrival_t_s == pytest.approx(send.t_s + got.time_to_arrival_s)
     status = _random_statuses(1, seed=9)[0]
     back = OutputDecoder().decode(StatusEncoder().encode(status, timestamp=5.0))
     assert isinstance(back, ReceivedStatus)
@@ -567,15 +682,16 @@ def test_receiver_gets_back_what_was_sent() -> None:
 def test_receiver_gets_back_details_confirmations_and_road_status() -> None:
     rx = OutputDecoder()
     enc = AlertDetailEncoder()
-    for k, alert in enumerate(_random_alerts(50, seed=10)):
+    for k, send in enumerate(_random_sends(50, seed=10)):
         detector = ("std", "two-axle")[k % 2]
-        d = rx.decode(enc.encode(alert, detector))
+        alert = send.alert
+        d = rx.decode(enc.encode(send, detector))
         assert isinstance(d, ReceivedAlertDetail)
-        assert d.alert_id == alert.alert_id % 256
+        assert d.alert_id == send.can_id
         assert d.detector == detector
-        assert d.t_rx_s == alert.t_emit_s
+        assert d.t_rx_s == send.t_s
         assert d.height_std_mm == pytest.approx(alert.height_std_mm, abs=1.0)
-        assert d.length_m == pytest.approx(alert.length_m, abs=0.025)
+        assert d.crossing_age_s == pytest.approx(send.age_s, abs=0.05)
         assert d.score == pytest.approx(alert.severity_px, abs=0.1)
         assert d.lead_speed_mps == pytest.approx(alert.lead_speed_mps, abs=0.25 * KMH)
     conf = ConfirmEncoder()

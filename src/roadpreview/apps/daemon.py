@@ -41,7 +41,7 @@ from roadpreview.loop import FrameTimes, Pace, RunSummary, install_signal_handle
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.pipeline import FrameResult, Pipeline
 from roadpreview.sinks import Sink
-from roadpreview.sinks.can import CanBusSink
+from roadpreview.sinks.can import CanBusSink, repetition_config
 from roadpreview.sinks.files import FrameTableSink
 from roadpreview.sources.can import CanBusSource, make_decoder
 from roadpreview.sources.video import CameraDeviceSource, camera_kind, open_camera
@@ -288,7 +288,10 @@ class Daemon:
                 self.input_bus, decoder, queue_size=cfg.daemon.can_queue_size
             )
             self.output = CanBusSink(
-                self.output_bus, detector=cfg.anomaly.detector, record=opts.alerts_log
+                self.output_bus,
+                detector=cfg.anomaly.detector,
+                record=opts.alerts_log,
+                repetition=repetition_config(cfg),
             )
         except BaseException:
             self._shutdown_buses()

@@ -28,7 +28,7 @@ from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.pipeline import FrameResult, Pipeline
 from roadpreview.pipeline.truthmatch import MatchReport, match_alerts
 from roadpreview.sinks import Sink
-from roadpreview.sinks.can import CanLogSink, CanMemorySink
+from roadpreview.sinks.can import CanLogSink, CanMemorySink, repetition_config
 from roadpreview.sinks.files import (
     AlertsJsonlSink,
     AnnotatedVideoSink,
@@ -176,7 +176,9 @@ def replay(
     if collected is not None:
         sinks.append(collected)
     if out_dir is None:  # the CAN output is encoded anyway (what an ECU would get), kept here
-        sinks.append(CanMemorySink(detector=config.anomaly.detector))
+        sinks.append(
+            CanMemorySink(detector=config.anomaly.detector, repetition=repetition_config(config))
+        )
     else:
         out_dir.mkdir(parents=True, exist_ok=True)
         truth_times = [
@@ -186,7 +188,11 @@ def replay(
         ]
         sinks += [
             FrameTableSink(out_dir / "frames.csv"),
-            CanLogSink(out_dir / "alerts.blf", detector=config.anomaly.detector),
+            CanLogSink(
+                out_dir / "alerts.blf",
+                detector=config.anomaly.detector,
+                repetition=repetition_config(config),
+            ),
             AlertsJsonlSink(out_dir / "alerts.jsonl"),
             PlotSink(out_dir / "plots.png", t0=start, truth_times=truth_times),
         ]

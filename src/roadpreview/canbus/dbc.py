@@ -5,8 +5,8 @@ repository's ``data/roadpreview.dbc`` is a symlink to it) and is loaded with
 cantools in strict mode. Every input message carries an AUTOSAR E2E profile 1
 header: byte 0 is a CRC-8 SAE J1850 over the message's E2E data ID (DBC
 attribute ``E2E_DataID``) and bytes 1..7, bits 8..11 an alive counter that
-runs 0..14; so do the outputs ``RP_ALERT``, ``RP_ALERT_DETAIL``, ``RP_CONFIRM``,
-``RP_STATUS`` and ``RP_ROAD_STATUS`` (`roadpreview.canbus.output`). The CRC comes
+runs 0..14; so do the outputs ``RP_ALERT``, ``RP_ALERT_DETAIL``, ``RP_ALERT_END``,
+``RP_CONFIRM``, ``RP_STATUS`` and ``RP_ROAD_STATUS`` (`roadpreview.canbus.output`). The CRC comes
 from the ``autosar-e2e`` package. Messages and signals are documented in
 ``docs/can-interface.md``.
 
@@ -43,6 +43,7 @@ RP_STATUS = "RP_STATUS"
 RP_ROAD_STATUS = "RP_ROAD_STATUS"
 RP_ALERT_DETAIL = "RP_ALERT_DETAIL"
 RP_CONFIRM = "RP_CONFIRM"
+RP_ALERT_END = "RP_ALERT_END"
 
 #: 11-bit identifiers reserved for roadpreview's own output messages (alerts, confirmations,
 #: status)

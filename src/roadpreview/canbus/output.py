@@ -1,17 +1,19 @@
-"""roadpreview's output messages: per alert ``RP_ALERT`` + ``RP_ALERT_DETAIL``, per checked
-alert ``RP_CONFIRM``, and every 100 ms ``RP_STATUS`` + ``RP_ROAD_STATUS``.
+"""roadpreview's output messages: per active alert and period ``RP_ALERT`` +
+``RP_ALERT_DETAIL``, at its end ``RP_ALERT_END``, per checked alert ``RP_CONFIRM``, and
+every 100 ms ``RP_STATUS`` + ``RP_ROAD_STATUS``.
 
-`AlertEncoder`, `AlertDetailEncoder`, `ConfirmEncoder`, `StatusEncoder` and
-`RoadStatusEncoder` turn an `Alert` / a `ConfirmationResult` / a `Status`
+`AlertEncoder`, `AlertDetailEncoder`, `AlertEndEncoder`, `ConfirmEncoder`,
+`StatusEncoder` and `RoadStatusEncoder` turn an `AlertSend` (an alert as of one send,
+`roadpreview.canbus.repetition`) / an `AlertEnd` / a `ConfirmationResult` / a `Status`
 into a ``can.Message`` through cantools (physical values in, the DBC does
 the bits), with an AUTOSAR E2E profile 1 header: an alive counter per
 message (0..14, +1 per frame) and the CRC from ``autosar-e2e``. Values
 outside a signal's range saturate at its limits (the DBC comments say so);
 unknown values go out as ``SignalNotAvailable``. `OutputDecoder` is the
 receiving side (the chassis ECU, a test, a monitor): it checks CRC and
-counter and gives `ReceivedAlert`, `ReceivedAlertDetail`, `ReceivedConfirm`,
-`ReceivedStatus` and `ReceivedRoadStatus` in SI units, None for "not
-available".
+counter and gives `ReceivedAlert`, `ReceivedAlertDetail`, `ReceivedAlertEnd`,
+`ReceivedConfirm`, `ReceivedStatus` and `ReceivedRoadStatus` in SI units, None for
+"not available".
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from roadpreview.canbus.dbc import (
     E2E_COUNTER_MODULUS,
     RP_ALERT,
     RP_ALERT_DETAIL,
+    RP_ALERT_END,
     RP_CONFIRM,
     RP_ROAD_STATUS,
     RP_STATUS,
@@ -40,6 +43,7 @@ from roadpreview.canbus.dbc import (
     load_database,
 )
 from roadpreview.canbus.decode import signal_values
+from roadpreview.canbus.repetition import AlertEnd, AlertSend, EndCause, EndReason
 from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.types import (
     ISO8608_CLASSES,
@@ -105,33 +109,37 @@ class _ProtectedEncoder:
 
 
 class AlertEncoder(_ProtectedEncoder):
-    """`Alert` -> ``RP_ALERT`` frame (module docstring)."""
+    """`AlertSend` -> ``RP_ALERT`` frame (module docstring). An `Alert` is sent as at its
+    emission (`AlertSend.at_emission`)."""
 
     def __init__(self, db: Database | None = None, *, channel: int | str | None = None) -> None:
         super().__init__(RP_ALERT, db, channel)
 
-    def values(self, alert: Alert) -> dict[str, float | int | str]:
-        """The physical signal values (before E2E) of ``alert``."""
-        age = alert.t_emit_s - alert.t_s
+    def values(self, send: AlertSend | Alert) -> dict[str, float | int | str]:
+        """The physical signal values (before E2E) of one send."""
+        send = _as_send(send)
+        alert = send.alert
         return {
             "AlertSide": int(alert.side),
             "AlertFusionMode": int(alert.mode),
-            "AlertId": alert.alert_id % 256,
-            "AlertDistance": self._fit("AlertDistance", alert.distance_m),
-            "AlertTimeToArrival": self._fit("AlertTimeToArrival", alert.time_to_arrival_s),
+            "AlertId": send.can_id % 256,
+            "AlertDistance": self._fit("AlertDistance", send.distance_m),
+            "AlertTimeToArrival": self._fit("AlertTimeToArrival", send.time_to_arrival_s),
             "AlertHeight": self._fit("AlertHeight", alert.height_mm),
+            "AlertLength": self._fit("AlertLength", alert.length_m),
             "AlertConfidence": self._fit("AlertConfidence", _scaled(alert.confidence, 100.0)),
-            "AlertEventAge": self._fit("AlertEventAge", age if age >= 0 else None),
         }
 
-    def encode(self, alert: Alert, *, timestamp: float | None = None) -> can.Message:
-        """The next ``RP_ALERT`` frame (time stamp: ``timestamp``, default the alert's emission)."""
-        ts = alert.t_emit_s if timestamp is None else timestamp
-        return self._frame(self.values(alert), float(ts))
+    def encode(self, send: AlertSend | Alert, *, timestamp: float | None = None) -> can.Message:
+        """The next ``RP_ALERT`` frame (time stamp: ``timestamp``, default the send's time)."""
+        send = _as_send(send)
+        ts = send.t_s if timestamp is None else timestamp
+        return self._frame(self.values(send), float(ts))
 
 
 class AlertDetailEncoder(_ProtectedEncoder):
-    """`Alert` -> ``RP_ALERT_DETAIL`` frame, sent right after its ``RP_ALERT`` (module docstring).
+    """`AlertSend` -> ``RP_ALERT_DETAIL`` frame, sent right after each ``RP_ALERT`` (module
+    docstring).
 
     ``detector`` names the detector that raised the alert (``anomaly.detector``,
     a key of `DETECTOR_CODES`); `Alert` does not say."""
@@ -139,24 +147,57 @@ class AlertDetailEncoder(_ProtectedEncoder):
     def __init__(self, db: Database | None = None, *, channel: int | str | None = None) -> None:
         super().__init__(RP_ALERT_DETAIL, db, channel)
 
-    def values(self, alert: Alert, detector: str = "two-axle") -> dict[str, float | int | str]:
-        """The physical signal values (before E2E) of ``alert``'s details."""
+    def values(
+        self, send: AlertSend | Alert, detector: str = "two-axle"
+    ) -> dict[str, float | int | str]:
+        """The physical signal values (before E2E) of one send's details."""
+        send = _as_send(send)
+        alert = send.alert
         return {
             "DetailDetector": detector_code(detector),
-            "AlertId": alert.alert_id % 256,
+            "AlertId": send.can_id % 256,
             "AlertHeightStd": self._fit("AlertHeightStd", alert.height_std_mm),
-            "AlertLength": self._fit("AlertLength", alert.length_m),
             "AlertScore": self._fit("AlertScore", alert.severity_px),
             "AlertLeadSpeed": self._fit("AlertLeadSpeed", _scaled(alert.lead_speed_mps, 1 / _KMH)),
+            "AlertCrossingAge": self._fit(
+                "AlertCrossingAge", send.age_s if send.age_s >= 0 else None
+            ),
         }
 
     def encode(
-        self, alert: Alert, detector: str = "two-axle", *, timestamp: float | None = None
+        self,
+        send: AlertSend | Alert,
+        detector: str = "two-axle",
+        *,
+        timestamp: float | None = None,
     ) -> can.Message:
-        """The next ``RP_ALERT_DETAIL`` frame (time stamp: ``timestamp``, default the alert's
-        emission)."""
-        ts = alert.t_emit_s if timestamp is None else timestamp
-        return self._frame(self.values(alert, detector), float(ts))
+        """The next ``RP_ALERT_DETAIL`` frame (time stamp: ``timestamp``, default the send's
+        time)."""
+        send = _as_send(send)
+        ts = send.t_s if timestamp is None else timestamp
+        return self._frame(self.values(send, detector), float(ts))
+
+
+class AlertEndEncoder(_ProtectedEncoder):
+    """`AlertEnd` -> ``RP_ALERT_END`` frame (module docstring)."""
+
+    def __init__(self, db: Database | None = None, *, channel: int | str | None = None) -> None:
+        super().__init__(RP_ALERT_END, db, channel)
+
+    def values(self, end: AlertEnd) -> dict[str, float | int | str]:
+        """The physical signal values (before E2E) of ``end``."""
+        return {
+            "EndReason": int(end.reason),
+            "EndCause": int(end.cause),
+            "EndAlertId": end.can_id % 256,
+            "EndAlertSends": min(max(end.sends, 0), 255),
+            "EndDistance": self._fit("EndDistance", end.distance_m),
+        }
+
+    def encode(self, end: AlertEnd, *, timestamp: float | None = None) -> can.Message:
+        """The next ``RP_ALERT_END`` frame (time stamp: ``timestamp``, default the end's)."""
+        ts = end.t_s if timestamp is None else timestamp
+        return self._frame(self.values(end), float(ts))
 
 
 class ConfirmEncoder(_ProtectedEncoder):
@@ -260,24 +301,28 @@ class RoadStatusEncoder(_ProtectedEncoder):
 
 class OutputEncoders:
     """roadpreview's output messages, encoded from one database for one detector: what a
-    run sends per alert (RP_ALERT, then RP_ALERT_DETAIL), per confirmation (RP_CONFIRM)
-    and periodically (RP_STATUS, RP_ROAD_STATUS). Shared by the live sender and the
-    replay's log so that both send the same frames in the same order."""
+    run sends per alert and period (RP_ALERT, then RP_ALERT_DETAIL), at an alert's end
+    (RP_ALERT_END), per confirmation (RP_CONFIRM) and periodically (RP_STATUS,
+    RP_ROAD_STATUS). Shared by the live sender and the replay's log so that both send the
+    same frames in the same order."""
 
     def __init__(self, db: Database | None = None, *, detector: str = "two-axle") -> None:
         detector_code(detector)  # an unknown name fails here, not at the first alert
         self.detector = detector
         self.alert = AlertEncoder(db)
         self.detail = AlertDetailEncoder(self.alert.db)
+        self.end = AlertEndEncoder(self.alert.db)
         self.confirm = ConfirmEncoder(self.alert.db)
         self.status = StatusEncoder(self.alert.db)
         self.road = RoadStatusEncoder(self.alert.db)
 
-    def alert_frames(self, alert: Alert, *, timestamp: float | None = None) -> list[can.Message]:
-        """One alert's frames: its ``RP_ALERT``, then its ``RP_ALERT_DETAIL``."""
+    def alert_frames(
+        self, send: AlertSend | Alert, *, timestamp: float | None = None
+    ) -> list[can.Message]:
+        """One send of an alert: its ``RP_ALERT``, then its ``RP_ALERT_DETAIL``."""
         return [
-            self.alert.encode(alert, timestamp=timestamp),
-            self.detail.encode(alert, self.detector, timestamp=timestamp),
+            self.alert.encode(send, timestamp=timestamp),
+            self.detail.encode(send, self.detector, timestamp=timestamp),
         ]
 
     def status_frames(self, status: Status, *, timestamp: float = 0.0) -> list[can.Message]:
@@ -297,6 +342,10 @@ def detector_code(detector: str) -> int:
             f" one of {sorted(DETECTOR_CODES)}"
         )
     return code
+
+
+def _as_send(send: AlertSend | Alert) -> AlertSend:
+    return send if isinstance(send, AlertSend) else AlertSend.at_emission(send)
 
 
 def _scaled(x: float | None, factor: float) -> float | None:
@@ -322,8 +371,9 @@ def alert_frames(
     detector: str = "two-axle",
 ) -> list[can.Message]:
     """``RP_ALERT`` + ``RP_ALERT_DETAIL`` frames of ``alerts`` (two per alert, in that order)
-    at their emission times (for `write_can_log`); ``detector``: ``anomaly.detector``
-    (when no ``encoders`` are given)."""
+    at their emission times, each sent once as `AlertSend.at_emission` (for
+    `write_can_log`; a run repeats them, `roadpreview.sinks.can`); ``detector``:
+    ``anomaly.detector`` (when no ``encoders`` are given)."""
     enc = encoders or OutputEncoders(detector=detector)
     return [m for a in alerts for m in enc.alert_frames(a)]
 
@@ -337,21 +387,20 @@ class ReceivedAlert:
 
     t_rx_s: float  #: reception time stamp of the frame, s
     counter: int  #: E2E alive counter
-    alert_id: int  #: the alert's sequence number, modulo 256
-    distance_m: float | None
-    time_to_arrival_s: float | None
-    event_age_s: float | None
+    alert_id: int  #: the alert's 8-bit id (unique among the active alerts)
+    distance_m: float | None  #: the ego's front axle to the anomaly now (negative: passed)
+    time_to_arrival_s: float | None  #: from this frame, at the current speed
     height_mm: float | None  #: bump +, pothole -
+    length_m: float | None  #: along the road
     side: Side
     confidence: float | None  #: 0..1
     mode: FusionMode
 
     @property
-    def time_left_s(self) -> float | None:
-        """Time from this frame until the ego reaches the anomaly (None if unknown)."""
-        if self.time_to_arrival_s is None or self.event_age_s is None:
-            return None
-        return self.time_to_arrival_s - self.event_age_s
+    def arrival_t_s(self) -> float | None:
+        """When the ego's front axle reaches the anomaly, on the receiver's clock (None if
+        unknown)."""
+        return None if self.time_to_arrival_s is None else self.t_rx_s + self.time_to_arrival_s
 
 
 @dataclass(frozen=True, slots=True)
@@ -363,9 +412,22 @@ class ReceivedAlertDetail:
     alert_id: int  #: the ``RP_ALERT`` it details (sequence number modulo 256)
     detector: str  #: "std" or "two-axle" (``anomaly.detector``)
     height_std_mm: float | None
-    length_m: float | None
     score: float | None  #: the detector's score (std: px; two-axle: background stds)
     lead_speed_mps: float | None
+    crossing_age_s: float | None  #: since the lead crossed the anomaly
+
+
+@dataclass(frozen=True, slots=True)
+class ReceivedAlertEnd:
+    """An ``RP_ALERT_END`` frame as a receiver sees it (SI units; None: not available)."""
+
+    t_rx_s: float
+    counter: int
+    alert_id: int  #: the alert that ended (8-bit id)
+    reason: EndReason
+    cause: EndCause
+    sends: int  #: RP_ALERT frames sent for the alert (saturates at 255)
+    distance_m: float | None  #: the front axle to the anomaly then (negative: passed)
 
 
 @dataclass(frozen=True, slots=True)
@@ -422,16 +484,21 @@ class ReceivedRoadStatus:
 
 #: what `OutputDecoder.decode` gives for a good frame
 ReceivedOutput = (
-    ReceivedAlert | ReceivedAlertDetail | ReceivedConfirm | ReceivedStatus | ReceivedRoadStatus
+    ReceivedAlert
+    | ReceivedAlertDetail
+    | ReceivedAlertEnd
+    | ReceivedConfirm
+    | ReceivedStatus
+    | ReceivedRoadStatus
 )
-_OUTPUTS = (RP_ALERT, RP_ALERT_DETAIL, RP_CONFIRM, RP_STATUS, RP_ROAD_STATUS)
+_OUTPUTS = (RP_ALERT, RP_ALERT_DETAIL, RP_ALERT_END, RP_CONFIRM, RP_STATUS, RP_ROAD_STATUS)
 
 
 class OutputDecoder:
     """Decode roadpreview's output frames; CRC and counter checked, bad frames counted.
 
     ``decode`` returns None for a frame that is not one of roadpreview's outputs
-    (``RP_ALERT``, ``RP_ALERT_DETAIL``, ``RP_CONFIRM``, ``RP_STATUS``,
+    (``RP_ALERT``, ``RP_ALERT_DETAIL``, ``RP_ALERT_END``, ``RP_CONFIRM``, ``RP_STATUS``,
     ``RP_ROAD_STATUS``) or fails a check; ``problems`` counts the reasons (``crc``, ``length``,
     ``counter_repeated``) and ``lost`` the frames a counter jump says were
     missed.
@@ -501,8 +568,8 @@ class OutputDecoder:
                 alert_id=code("AlertId"),
                 distance_m=opt("AlertDistance"),
                 time_to_arrival_s=opt("AlertTimeToArrival"),
-                event_age_s=opt("AlertEventAge"),
                 height_mm=opt("AlertHeight"),
+                length_m=opt("AlertLength"),
                 side=Side(code("AlertSide")),
                 confidence=opt("AlertConfidence", 0.01),
                 mode=FusionMode(code("AlertFusionMode")),
@@ -515,9 +582,19 @@ class OutputDecoder:
                 alert_id=code("AlertId"),
                 detector=detectors.get(code("DetailDetector"), "unknown"),
                 height_std_mm=opt("AlertHeightStd"),
-                length_m=opt("AlertLength"),
                 score=opt("AlertScore"),
                 lead_speed_mps=opt("AlertLeadSpeed", _KMH),
+                crossing_age_s=opt("AlertCrossingAge"),
+            )
+        if m.name == RP_ALERT_END:
+            return ReceivedAlertEnd(
+                t_rx_s=t,
+                counter=counter,
+                alert_id=code("EndAlertId"),
+                reason=EndReason(code("EndReason")),
+                cause=EndCause(code("EndCause")),
+                sends=code("EndAlertSends"),
+                distance_m=opt("EndDistance"),
             )
         if m.name == RP_CONFIRM:
             return ReceivedConfirm(

@@ -70,6 +70,15 @@ class CanStageConfig:
     output_interface: str = param("", help="output bus interface; empty: the input bus")
     output_channel: str = param("", help="output bus channel; empty: the input bus")
     status_period_s: float = param(0.1, unit="s", gt=0.0, le=10.0, help="RP_STATUS cycle")
+    alert_repeat_period_s: float = param(
+        0.1,
+        unit="s",
+        gt=0.0,
+        le=1.0,
+        help="RP_ALERT + RP_ALERT_DETAIL repeated this often while an alert is active, with"
+        " distance and time to arrival as of each send: a lost frame costs one period, not"
+        " the alert",
+    )
     imu_timeout_s: float = param(
         0.5, unit="s", gt=0.0, help="no gyro sample for this long: the IMU is gone (watchdog)"
     )

@@ -1,17 +1,23 @@
 """CAN sinks: the alerts, confirmations and status as E2E-protected frames
 (``data/roadpreview.dbc``), on a live bus or in a log file.
 
-Per alert ``RP_ALERT`` then ``RP_ALERT_DETAIL`` as it is emitted, per confirmation
+Per active alert ``RP_ALERT`` then ``RP_ALERT_DETAIL`` as it is emitted and every
+repetition period after (on the frames' clock, with distance and time to arrival as of
+that frame), until the ego has passed its spot; then ``RP_ALERT_END`` (PASSED, or
+CANCELLED, also for every alert still active at close). `AlertRepeater`
+(`roadpreview.canbus.repetition`) decides what goes out when. Per confirmation
 ``RP_CONFIRM`` at its frame (with the running precision after it), and ``RP_STATUS`` +
-``RP_ROAD_STATUS`` when the loop says the status is due. Both sinks use one
+``RP_ROAD_STATUS`` when the loop says the status is due. Every sink uses one
 `OutputEncoders` bundle, so a log holds exactly the frames a bus would get.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -19,22 +25,44 @@ import can
 
 from roadpreview.canbus.logio import CanLogWriter
 from roadpreview.canbus.output import OutputEncoders
+from roadpreview.canbus.repetition import AlertEnd, AlertRepeater, AlertSend, RepetitionConfig
 from roadpreview.sinks import Sink
 from roadpreview.types import Alert, CameraFrame, ConfirmationResult, Status
 
 if TYPE_CHECKING:
+    from roadpreview.pipeline.config import PipelineConfig
     from roadpreview.pipeline.pipeline import FrameResult
     from roadpreview.pipeline.run_summary import RunSummary
 
 log = logging.getLogger(__name__)
 
 
-class CanSink(Sink, ABC):
-    """Encodes the output; subclasses put each frame somewhere (`_emit`)."""
+def repetition_config(config: PipelineConfig) -> RepetitionConfig:
+    """The alerts' repetition from the pipeline's configuration: the period
+    (``[can] alert_repeat_period_s``), the ego's geometry and the limits the alerts and
+    the ego's check use (``[anomaly.alert]``, ``[anomaly.confirm]``)."""
+    alert, confirm = config.anomaly.alert, config.anomaly.confirm
+    return RepetitionConfig(
+        period_s=config.can.alert_repeat_period_s,
+        camera_to_front_axle_m=alert.camera_to_front_axle_m,
+        wheelbase_m=confirm.wheelbase_m,
+        min_speed_mps=alert.min_speed_mps,
+        max_age_s=confirm.max_wait_s,
+    )
 
-    def __init__(self, *, detector: str = "two-axle") -> None:
+
+class CanSink(Sink, ABC):
+    """Encodes the output; subclasses put each frame somewhere (`_emit`). ``repetition``:
+    how alerts are repeated and ended (default: `RepetitionConfig`'s defaults; a run
+    passes `repetition_config` of its configuration)."""
+
+    def __init__(
+        self, *, detector: str = "two-axle", repetition: RepetitionConfig | None = None
+    ) -> None:
         self.encoders = OutputEncoders(detector=detector)
+        self.repeater = AlertRepeater(repetition)
         self.frames_out = 0  #: CAN frames emitted
+        self.t_last = -math.inf  #: the newest time the sink was called with (frame, status)
 
     @abstractmethod
     def _emit(self, msg: can.Message) -> bool:
@@ -44,32 +72,56 @@ class CanSink(Sink, ABC):
         for msg in msgs:
             self.frames_out += self._emit(msg)
 
-    def _alerts(self, t_s: float, alerts: Sequence[Alert]) -> None:
-        for a in alerts:
-            self._emit_all(self.encoders.alert_frames(a, timestamp=t_s))
+    def _send(self, items: Sequence[AlertSend | AlertEnd]) -> None:
+        for item in items:
+            if isinstance(item, AlertEnd):
+                self._emit_all([self.encoders.end.encode(item)])
+            else:
+                self._emit_all(self.encoders.alert_frames(item))
 
     def _confirmations(
         self, t_s: float, confirmations: Sequence[ConfirmationResult], status: Status
     ) -> None:
         encode = self.encoders.confirm.encode
-        self._emit_all([encode(c, status.precision, timestamp=t_s) for c in confirmations])
+        frames = []
+        for c in confirmations:  # under the alert's id on CAN, which is then free again
+            frames.append(
+                encode(
+                    replace(c, alert_id=self.repeater.can_id(c.alert_id)),
+                    status.precision,
+                    timestamp=t_s,
+                )
+            )
+            self.repeater.release(c.alert_id)
+        self._emit_all(frames)
 
     def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
-        self._alerts(result.t, result.alerts)
+        self.t_last = max(self.t_last, result.t)
+        self._send(self.repeater.frame(result.t, result.ego_speed_mps, result.alerts))
         self._confirmations(result.t, result.confirmations, status)
 
     def on_status(self, t_s: float, status: Status) -> None:
+        self.t_last = max(self.t_last, t_s)
         self._emit_all(self.encoders.status_frames(status, timestamp=t_s))
 
     def on_flush(self, t_s: float, alerts: Sequence[Alert], status: Status) -> None:
-        self._alerts(t_s, alerts)
+        # at the last frame's time: the ego drove nothing since, so the speed is not needed
+        self.t_last = max(self.t_last, t_s)
+        self._send(self.repeater.frame(t_s, None, alerts))
+
+    def close(self, summary: RunSummary) -> None:
+        """The alerts still active end CANCELLED (STOPPED), every end not yet repeated goes
+        out now (stamped with the newest time seen); subclasses then close their output."""
+        self._send(self.repeater.close(self.t_last if math.isfinite(self.t_last) else None))
 
 
 class CanMemorySink(CanSink):
     """The output frames kept in a list (``messages``), stamped with the pipeline's time."""
 
-    def __init__(self, *, detector: str = "two-axle") -> None:
-        super().__init__(detector=detector)
+    def __init__(
+        self, *, detector: str = "two-axle", repetition: RepetitionConfig | None = None
+    ) -> None:
+        super().__init__(detector=detector, repetition=repetition)
         self.messages: list[can.Message] = []
 
     def _emit(self, msg: can.Message) -> bool:
@@ -81,8 +133,14 @@ class CanLogSink(CanSink):
     """The output frames in a CAN log (format by suffix: BLF, ASC, candump, ...), written
     as they come and stamped with the pipeline's time of the frame that raised them."""
 
-    def __init__(self, path: str | Path, *, detector: str = "two-axle") -> None:
-        super().__init__(detector=detector)
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        detector: str = "two-axle",
+        repetition: RepetitionConfig | None = None,
+    ) -> None:
+        super().__init__(detector=detector, repetition=repetition)
         self.path = Path(path)
         self.writer = CanLogWriter(self.path)
 
@@ -91,14 +149,18 @@ class CanLogSink(CanSink):
         return True
 
     def close(self, summary: RunSummary) -> None:
-        self.writer.close()
+        try:
+            super().close(summary)
+        finally:
+            self.writer.close()
 
 
 class CanBusSink(CanSink):
     """The output frames sent on a bus (stamped with the pipeline's time, which is the
     wall clock in the daemon; the receiver stamps them again); a send error is logged and
     counted, never raised (the daemon goes on). ``record`` also writes every frame sent
-    to a CAN log. At close the last status (after the flush) is sent once more."""
+    to a CAN log. At close the active alerts end (CANCELLED, STOPPED) and the last status
+    (after the flush) is sent once more."""
 
     def __init__(
         self,
@@ -106,8 +168,9 @@ class CanBusSink(CanSink):
         *,
         detector: str = "two-axle",
         record: str | Path | None = None,
+        repetition: RepetitionConfig | None = None,
     ) -> None:
-        super().__init__(detector=detector)
+        super().__init__(detector=detector, repetition=repetition)
         self.bus = bus
         self.send_errors = 0  #: frames the bus refused
         self.record = CanLogWriter(record) if record is not None else None
@@ -147,6 +210,7 @@ class CanBusSink(CanSink):
 
     def close(self, summary: RunSummary) -> None:
         try:
+            super().close(summary)
             if self._last is not None:  # the last word: the counts after the flush
                 CanSink.on_status(self, *self._last)
         finally:
@@ -154,4 +218,4 @@ class CanBusSink(CanSink):
                 self.record.close()
 
 
-__all__ = ["CanBusSink", "CanLogSink", "CanMemorySink", "CanSink"]
+__all__ = ["CanBusSink", "CanLogSink", "CanMemorySink", "CanSink", "repetition_config"]
