@@ -1,4 +1,5 @@
-"""CAN log files: one set of frames through BLF, ASC and candump; damaged files; a real log."""
+"""CAN log files: one set of frames through every format python-can reads; damaged files; a
+real log."""
 
 from __future__ import annotations
 
@@ -20,8 +21,12 @@ from roadpreview.sim.imu import ImuConfig, simulate_imu
 T0 = 1735689600.0  # 2025-01-01T00:00:00Z
 #: timestamp resolution of each format as python-can writes it
 RESOLUTION = {".blf": 1e-9, ".asc": 1e-6, ".log": 1e-6, ".asc.gz": 1e-6, ".log.gz": 1e-6,
-              ".trc": 2e-6, ".trc.gz": 2e-6, ".csv": 0.0, ".csv.gz": 0.0}  # TRC: ms + day count
-ALL_SUFFIXES = [".blf", ".asc", ".log", ".trc", ".csv", ".asc.gz", ".log.gz", ".trc.gz", ".csv.gz"]
+              ".trc": 2e-6, ".trc.gz": 2e-6, ".csv": 0.0, ".csv.gz": 0.0,  # TRC: ms + day count
+              ".mf4": 0.0, ".db": 0.0}
+ALL_SUFFIXES = [".blf", ".asc", ".log", ".trc", ".csv", ".mf4", ".db",
+                ".asc.gz", ".log.gz", ".trc.gz", ".csv.gz"]
+#: formats without a channel column
+NO_CHANNEL = (".csv", ".csv.gz", ".db")
 
 
 def _frames(n: int = 400, seed: int = 0) -> list[can.Message]:
@@ -60,11 +65,12 @@ def test_round_trip_through_each_format(tmp_path: Path, suffix: str) -> None:
     got = list(reader)
     _assert_same(got, frames, RESOLUTION[suffix] + 5e-7)  # + float64 spacing at 1.7e9 s
     assert reader.problems == []
-    # CSV has no channel column
-    assert {m.channel for m in got} == ({None} if suffix.startswith(".csv") else {0})
+    # CSV and SQLite have no channel column
+    assert {m.channel for m in got} == ({None} if suffix in NO_CHANNEL else {0})
     if not suffix.endswith(".gz"):
         # python-can's own LogReader sees the same (ASC: ask for absolute times)
-        plain = list(can.LogReader(path, relative_timestamp=False))
+        with can.LogReader(path, relative_timestamp=False) as plain_reader:
+            plain = list(plain_reader)
         _assert_same(plain, frames, RESOLUTION[suffix] + 5e-7)
 
 
@@ -228,13 +234,40 @@ def test_blf_needs_unix_times(tmp_path: Path) -> None:
     assert [m.timestamp for m in read_can_log(tmp_path / "rel.log")] == [0.5, 0.51, 0.52]
 
 
-@pytest.mark.parametrize("name", ["x.txt", "x.blf.gz", "x", "x.mf4", "x.db"])
+@pytest.mark.parametrize("name", ["x.txt", "x.blf.gz", "x", "x.mf4.gz", "x.db.gz"])
 def test_unknown_suffixes(tmp_path: Path, name: str) -> None:
     with pytest.raises(ConfigError, match="unknown CAN log format"):
         write_can_log(tmp_path / name, _frames(2))
     (tmp_path / name).write_bytes(b"")
     with pytest.raises(InputDataError, match="unknown CAN log format"):
         read_can_log(tmp_path / name)
+
+
+@pytest.mark.parametrize("suffix", [".mf4", ".db"])
+def test_a_text_file_that_is_no_mf4_or_sqlite(tmp_path: Path, suffix: str) -> None:
+    path = tmp_path / f"notes{suffix}"
+    path.write_text("this is no CAN log\n" * 50)
+    reader = CanLogReader(path)
+    assert list(reader) == []
+    assert len(reader.problems) == 1
+    assert reader.problems[0].fatal
+    assert str(path) in str(reader.problems[0])
+    with pytest.raises(InputDataError, match=rf"notes\{suffix}"):
+        list(CanLogReader(path, errors="raise"))
+
+
+def test_sqlite_keeps_every_frame_of_a_long_burst(tmp_path: Path) -> None:
+    # python-can's writer thread batches 501 frames and stopped after the batch in hand
+    frames = _frames(1600)
+    write_can_log(tmp_path / "burst.db", frames)
+    _assert_same(list(read_can_log(tmp_path / "burst.db")), frames, 0.0)
+
+
+def test_sqlite_writer_replaces_an_existing_file(tmp_path: Path) -> None:
+    # python-can appends to an existing table; a log written twice must hold one drive
+    write_can_log(tmp_path / "a.db", _frames(5))
+    write_can_log(tmp_path / "a.db", _frames(3, seed=1))
+    _assert_same(list(read_can_log(tmp_path / "a.db")), _frames(3, seed=1), 0.0)
 
 
 def test_missing_log(tmp_path: Path) -> None:

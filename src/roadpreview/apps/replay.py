@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from roadpreview.camera import CameraModel
-from roadpreview.errors import InputDataError
+from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.loop import Pace, RunSummary, run
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.pipeline import FrameResult, Pipeline
@@ -38,9 +38,26 @@ from roadpreview.sinks.files import (
 )
 from roadpreview.sources import Source
 from roadpreview.sources.can import CanLogSource, first_timestamp, make_decoder
+from roadpreview.sources.clocks import (
+    CameraClock,
+    ClockPlan,
+    LogClock,
+    VideoTime,
+    is_unix_time,
+    plan_clocks,
+    video_file_time,
+)
 from roadpreview.sources.imu_csv import ImuCsvSource
 from roadpreview.sources.recording import RecordingFolder
-from roadpreview.sources.video import VideoFileSource
+from roadpreview.sources.rosbag import (
+    IMU_TYPES,
+    BagCameraSource,
+    BagSampleSource,
+    RosBag,
+    choose_topics,
+    is_bag,
+)
+from roadpreview.sources.video import VideoFileSource, frame_times
 from roadpreview.types import Alert, Confirmation, ConfirmationResult, FusionMode, RoadState
 
 log = logging.getLogger(__name__)
@@ -48,7 +65,13 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class ReplayInputs:
-    """What to replay. Times of the video are ``video_start_s`` + frame time (log clock)."""
+    """What to replay. ``video`` is the camera input: a video file, or a ROS bag (a
+    rosbag2 folder, ``.mcap``, ``.db3`` or ROS 1 ``.bag``: `is_bag`) whose image topic is
+    the camera and whose IMU and speed topics are read too; with CAN logs and/or an IMU
+    CSV. `sources` puts every input on one clock before anything is read
+    (`roadpreview.sources.clocks`): ``video_start_s`` pins the camera's time 0,
+    ``can_offset_s`` / ``imu_offset_s`` are added to the logs' stamps; None: by the rules
+    there (mixed clocks are refused)."""
 
     video: Path
     camera: CameraModel
@@ -58,6 +81,11 @@ class ReplayInputs:
     video_start_s: float | None = None
     truth_events: list[dict[str, Any]] | None = None
     duration_s: float | None = None
+    image_topic: str | None = None  #: the bag's camera topic; None: the only image topic
+    imu_topic: str | None = None  #: the bag's IMU topic; None: the only Imu topic, if any
+    speed_topic: str | None = None  #: the bag's speed topic; None: the only twist/odometry
+    can_offset_s: float | None = None
+    imu_offset_s: float | None = None
 
     @classmethod
     def from_recording(cls, folder: str | Path) -> ReplayInputs:
@@ -75,26 +103,90 @@ class ReplayInputs:
 
     @property
     def start_s(self) -> float:
-        """The time of the video's frame 0 on the log clock: ``video_start_s``, else the
-        first CAN frame's time, else 0."""
-        if self.video_start_s is not None:
-            return self.video_start_s
-        if self.can_logs:
-            return first_timestamp(self.can_logs[0])
-        return 0.0
+        """The time of the camera's own time 0 on the drive's clock (`sources`)."""
+        return self._clock_plan()[2].camera_start_s
 
-    def sources(self, config: PipelineConfig) -> tuple[VideoFileSource, list[Source]]:
-        """The video source (size checked against the calibration) and all sources."""
-        start = self.start_s
-        video = VideoFileSource(self.video, start_s=start, frames_csv=self.frames_csv)
-        video.check_size(self.camera.size)
-        sources: list[Source] = [video]
+    def _camera(
+        self,
+    ) -> tuple[VideoFileSource | BagCameraSource, CameraClock, list[BagSampleSource]]:
+        """The camera source (not yet on the drive's clock), its clock, and the bag's IMU
+        and speed topics (on the camera's clock)."""
+        if is_bag(self.video):
+            bag = RosBag(self.video)
+            topics = choose_topics(
+                bag.topics,
+                image=self.image_topic,
+                imu=self.imu_topic,
+                speed=self.speed_topic,
+                where=str(self.video),
+            )
+            others = [BagSampleSource(bag, t) for t in (topics.imu, topics.speed) if t]
+            own_t = bag.path.stat().st_mtime - bag.duration_s
+            clock = CameraClock(
+                f"bag {bag.path} ({topics.image})",
+                bag.first_stamp(topics.image),
+                0.0 if self.video_start_s is None else self.video_start_s,
+                VideoTime(own_t, "the bag's modification time minus its duration"),
+            )
+            return BagCameraSource(bag, topics.image), clock, others
+        if any(t is not None for t in (self.image_topic, self.imu_topic, self.speed_topic)):
+            raise ConfigError(f"{self.video}: topics are for a ROS bag input, not a video")
+        video = VideoFileSource(self.video, frames_csv=self.frames_csv)
+        first_rel = 0.0
+        if video.frames_csv is not None:
+            first_rel = next(frame_times(video.frames_csv), 0.0)
+        pinned = self.video_start_s
+        if pinned is None and is_unix_time(first_rel):
+            pinned = 0.0  # frames.csv holds Unix times: the frames carry their own clock
+        duration = video.n_frames / video.fps if video.fps > 0 else 0.0
+        clock = CameraClock(
+            f"video {video.path}", first_rel, pinned, video_file_time(video.path, duration)
+        )
+        return video, clock, []
+
+    def _clock_plan(
+        self, config: PipelineConfig | None = None
+    ) -> tuple[VideoFileSource | BagCameraSource, list[Source], ClockPlan]:
+        """Every source, on the drive's clock (`plan_clocks`), and the plan."""
+        camera, clock, others = self._camera()
+        logs: list[tuple[CanLogSource | ImuCsvSource, LogClock]] = []
         if self.can_logs:
-            decoder = make_decoder(config.can.dbc, config.can.mapping)
-            sources += [CanLogSource(p, decoder) for p in self.can_logs]
+            cfg = config or PipelineConfig()
+            decoder = make_decoder(cfg.can.dbc, cfg.can.mapping)
+            for path in self.can_logs:
+                first = first_timestamp(path)
+                clock_of = LogClock(f"CAN log {path}", first, self.can_offset_s, "--can-offset")
+                logs.append((CanLogSource(path, decoder), clock_of))
         if self.imu_csv is not None:
-            sources.append(ImuCsvSource(self.imu_csv, offset_s=start))
-        return video, sources
+            imu = ImuCsvSource(self.imu_csv)
+            clock_of = LogClock(
+                f"IMU CSV {self.imu_csv}", imu.first_s, self.imu_offset_s, "--imu-offset"
+            )
+            logs.append((imu, clock_of))
+        plan = plan_clocks(clock, [c for _, c in logs])
+        camera.start_s = plan.camera_start_s
+        for topic in others:
+            topic.offset_s = plan.camera_start_s
+        for src, c in logs:
+            src.offset_s = plan.offsets_s[c.name]
+        return camera, [camera, *others, *(src for src, _ in logs)], plan
+
+    def sources(
+        self, config: PipelineConfig
+    ) -> tuple[VideoFileSource | BagCameraSource, list[Source]]:
+        """The camera source (size checked against the calibration) and all sources, every
+        one on the drive's clock (class docstring); the clock rules used are logged."""
+        camera, sources, plan = self._clock_plan(config)
+        camera.check_size(self.camera.size)
+        for note in plan.notes:
+            log.info("clock: %s", note)
+        for warning in plan.warnings:
+            log.warning("clock: %s", warning)
+        if not any(isinstance(s, ImuCsvSource | CanLogSource) for s in sources) and not any(
+            isinstance(s, BagSampleSource) and s.msgtype in IMU_TYPES for s in sources
+        ):
+            log.warning("%s: no IMU input: vision-only fusion (VISUAL_ONLY)", self.video)
+        return camera, sources
 
 
 @dataclass

@@ -122,6 +122,7 @@ class CanInputDecoder:
 
     def __init__(self, db: Database, mapping: InputMapping, *, db_name: str = "the DBC") -> None:
         self.db = db
+        self.db_name = db_name  #: the DBC's name, for messages
         self.mapping = mapping
         self.bound: BoundMapping = bind_mapping(mapping, db, db_name=db_name)
         self.stats = DecodeStats()

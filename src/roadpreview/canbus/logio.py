@@ -1,10 +1,12 @@
-"""Write and read CAN log files (Vector BLF and ASC, candump ``-L`` .log, PEAK TRC, CSV).
+"""Write and read CAN log files (Vector BLF and ASC, candump ``-L`` .log, PEAK TRC, CSV,
+ASAM MDF4, python-can's SQLite).
 
 The format follows the file suffix: ``.blf``, ``.asc``, ``.log``, ``.trc``,
-``.csv`` and, for the text formats, their gzip variants (``.asc.gz``,
-``.log.gz``, ``.trc.gz``, ``.csv.gz``; python-can cannot gzip BLF, which is
-compressed already). These are the formats ``can.LogReader`` reads; MF4 and
-SQLite are left out (MF4 needs asammdf, SQLite is no logger's format).
+``.csv``, ``.mf4``, ``.db`` and, for the text formats, their gzip variants
+(``.asc.gz``, ``.log.gz``, ``.trc.gz``, ``.csv.gz``; python-can cannot gzip
+BLF, MF4 or SQLite). These are every format ``can.LogReader`` reads. MF4
+goes through python-can's ``mf4`` extra (asammdf); without it, opening an
+``.mf4`` raises `MissingDependencyError` naming the install command.
 
 Writing goes through ``can.Logger``. Reading uses python-can's own readers
 (the ones ``can.LogReader`` picks by suffix) but never dies on bad data: **a
@@ -28,6 +30,11 @@ Timestamps are what the logger stored, in seconds (normally Unix time):
   in ms with 3 decimals; about 1 µs.
 * CSV (python-can's layout: time, hex ID, flags, DLC, base64 data): the full
   float, exact. It has no channel column: channels read back as None.
+* MF4 (python-can's writer: a CAN bus-logging group, start time plus float
+  offsets): Unix times come back exact; times near 0 lose precision (float32
+  offsets, about 1e-8 s at 1 s).
+* SQLite (``.db``, python-can's ``messages`` table): the full float, exact. It
+  has no channel column: channels read back as None.
 * ASC: the start of measurement as a *local-time* calendar date (1 ms)
   plus offsets in µs. We start the measurement on the whole second before
   the first frame (as CANoe does, the first frame need not be at 0), so the
@@ -44,12 +51,14 @@ format.
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import logging
 import math
 import os
 import re
 import struct
+import time
 import zlib
 from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass
@@ -61,7 +70,12 @@ import can
 from can.io.blf import BLFParseError
 from can.io.generic import MessageWriter
 
-from roadpreview.errors import ConfigError, InputDataError, OperationError
+from roadpreview.errors import (
+    ConfigError,
+    InputDataError,
+    MissingDependencyError,
+    OperationError,
+)
 
 log = logging.getLogger(__name__)
 
@@ -72,12 +86,16 @@ LOG_SUFFIXES = (
     ".log",
     ".trc",
     ".csv",
+    ".mf4",
+    ".db",
     ".asc.gz",
     ".log.gz",
     ".trc.gz",
     ".csv.gz",
 )
-_BASE_FORMATS = (".blf", ".asc", ".log", ".trc", ".csv")
+_BASE_FORMATS = (".blf", ".asc", ".log", ".trc", ".csv", ".mf4", ".db")
+#: binary formats: no gzip variant, read as a whole by python-can's reader
+_BINARY_FORMATS = (".blf", ".mf4", ".db")
 
 #: python-can's BLF code treats earlier timestamps as "not a Unix time" (1990-01-01)
 _BLF_MIN_TIMESTAMP = 631152000.0
@@ -86,14 +104,14 @@ _CHANNEL_NAME = re.compile(r"^[a-z]*can(\d+)$", re.IGNORECASE)
 
 
 def log_format(path: str | Path) -> tuple[str, bool]:
-    """The format of a CAN log from its suffix: (``".blf"|".asc"|".log"|".trc"|".csv"``, gzipped).
+    """The format of a CAN log from its suffix: (one of `_BASE_FORMATS`, gzipped).
 
     Raises `InputDataError` for anything else.
     """
     suffixes = [s.lower() for s in Path(path).suffixes]
     gz = bool(suffixes) and suffixes[-1] == ".gz"
     base = suffixes[-2] if gz and len(suffixes) >= 2 else (suffixes[-1] if suffixes else "")
-    if base not in _BASE_FORMATS or (gz and base == ".blf"):
+    if base not in _BASE_FORMATS or (gz and base in _BINARY_FORMATS):
         raise InputDataError(
             f"{path}: unknown CAN log format; use one of {', '.join(LOG_SUFFIXES)}"
         )
@@ -123,12 +141,38 @@ class _ASCWriter(can.ASCWriter):
         super().log_event(message, timestamp)
 
 
+class _SqliteWriter(can.SqliteWriter):
+    """python-can's SQLite writer, waiting at ``stop`` until its queue is drained.
+
+    Its writer thread takes at most 501 frames per batch and leaves its loop at the
+    first batch after ``stop``: frames still queued behind a full batch were lost (a
+    1232-frame drive came back with 501).
+    """
+
+    def stop(self) -> None:
+        while not self.buffer.empty() and self._writer_thread.is_alive():
+            time.sleep(0.01)
+        super().stop()
+
+
+def _needs_asammdf(path: str | Path) -> MissingDependencyError:
+    return MissingDependencyError(
+        f"{path}: MF4 needs asammdf; install it with: pip install 'python-can[mf4]'"
+    )
+
+
 def _open_writer(path: str | Path, fmt: str, gz: bool) -> MessageWriter:
     if fmt == ".asc":
         if gz:
             return _ASCWriter(gzip.open(path, mode="wt", encoding="utf-8"))
         return _ASCWriter(os.fspath(path))
-    return can.Logger(os.fspath(path))
+    if fmt == ".db":
+        Path(path).unlink(missing_ok=True)  # python-can would append to an existing table
+        return _SqliteWriter(os.fspath(path))
+    try:
+        return can.Logger(os.fspath(path))
+    except NotImplementedError:  # python-can's answer when asammdf is missing
+        raise _needs_asammdf(path) from None
 
 
 class CanLogWriter:
@@ -353,7 +397,12 @@ class CanLogReader:
         self.problems = []
         if not self.path.is_file():
             raise InputDataError(f"{self.path}: CAN log not found")
-        frames = self._iter_blf() if self.format == ".blf" else self._iter_text()
+        if self.format == ".blf":
+            frames = self._iter_blf()
+        elif self.format in (".mf4", ".db"):
+            frames = self._iter_whole()
+        else:
+            frames = self._iter_text()
         for msg in frames:
             msg.channel = channel_number(msg.channel)
             yield msg
@@ -414,6 +463,34 @@ class CanLogReader:
                         line=lines.line_no + 1,
                         fatal=True,
                     )
+                )
+
+    def _iter_whole(self) -> Iterator[can.Message]:
+        """MF4 and SQLite: python-can's reader over the whole file; a file it cannot
+        open or finish is one fatal problem (frames before it are delivered)."""
+        kind = "MF4" if self.format == ".mf4" else "SQLite CAN log"
+        with contextlib.ExitStack() as stack:
+            try:
+                if self.format == ".mf4":
+                    # an open file of ours: python-can leaks the one it opens when asammdf
+                    # refuses the file
+                    reader: Any = can.MF4Reader(stack.enter_context(open(self.path, "rb")))
+                else:
+                    reader = can.SqliteReader(os.fspath(self.path))
+                stack.callback(reader.stop)
+            except NotImplementedError:  # python-can's answer when asammdf is missing
+                raise _needs_asammdf(self.path) from None
+            # asammdf and sqlite3 raise many types for a damaged file; each is this problem
+            except Exception as exc:
+                self._problem(
+                    LogProblem(str(self.path), f"not a readable {kind} ({exc!r})", fatal=True)
+                )
+                return
+            try:
+                yield from reader
+            except Exception as exc:
+                self._problem(
+                    LogProblem(str(self.path), f"corrupt {kind} data ({exc!r})", fatal=True)
                 )
 
     def _iter_blf(self) -> Iterator[can.Message]:

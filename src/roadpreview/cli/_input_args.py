@@ -1,5 +1,6 @@
 """Command-line options that say what a drive is (replay, calibrate, batch): a recording
-folder, or a video with its calibration, CAN logs and/or an IMU CSV.
+folder, a video with its calibration, or a ROS bag; with CAN logs and/or an IMU CSV, and
+the offsets that put their clocks on one (``docs/inputs.md``).
 
 `add_input_arguments` declares them; `inputs_from_args` turns them into `ReplayInputs`.
 """
@@ -15,46 +16,91 @@ if TYPE_CHECKING:
 
 
 def add_input_arguments(p: argparse.ArgumentParser, *, camera_required: bool = False) -> None:
-    """The input positional and its companions (``--camera``, ``--can``, ``--imu-csv``,
-    ``--frames-csv``, ``--video-start``)."""
-    p.add_argument("input", type=Path, help="a recording folder, or a video file")
+    """The input positional and its companions: ``--camera``, ``--can``, ``--imu-csv``,
+    ``--frames-csv``, the clock options and the bag's topics."""
+    p.add_argument(
+        "input",
+        type=Path,
+        help="a recording folder, a video file, or a ROS bag (rosbag2 folder, .mcap, .db3,"
+        " ROS 1 .bag)",
+    )
     p.add_argument(
         "--camera",
         type=Path,
         required=camera_required,
-        help="camera calibration (TOML), for a video input",
+        help="camera calibration (TOML), for a video or bag input",
     )
-    p.add_argument("--can", type=Path, action="append", default=[], help="a CAN log (repeatable)")
+    p.add_argument(
+        "--can",
+        type=Path,
+        action="append",
+        default=[],
+        help="a CAN log (repeatable): .blf .asc .log .trc .csv .mf4 .db (text ones also .gz)",
+    )
     p.add_argument("--imu-csv", type=Path, help="an IMU CSV (smartphone style)")
     p.add_argument("--frames-csv", type=Path, help="frame time stamps (frame,t_s)")
-    p.add_argument(
+    clocks = p.add_argument_group(
+        "clocks",
+        "By default frame 0 is at the first sample of a log on Unix time, else at the"
+        " video's creation time (or file time minus duration); a log whose clock starts"
+        " near 0 starts with the video. Mixed clocks are refused unless an offset is given.",
+    )
+    clocks.add_argument(
         "--video-start",
         type=float,
         default=None,
-        help="time of the first frame on the log clock (s); default: first CAN frame",
+        metavar="SECONDS",
+        help="time of the video's frame 0 on the drive's clock (Unix time, s)",
     )
+    clocks.add_argument(
+        "--can-offset",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="added to every CAN log's time stamps",
+    )
+    clocks.add_argument(
+        "--imu-offset",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="added to the IMU CSV's time stamps (the camera-IMU estimator still refines it)",
+    )
+    bag = p.add_argument_group("ROS bag topics", "default: the only topic of each type")
+    bag.add_argument("--image-topic", help="sensor_msgs/Image or CompressedImage topic")
+    bag.add_argument("--imu-topic", help="sensor_msgs/Imu topic")
+    bag.add_argument("--speed-topic", help="TwistStamped, TwistWithCovarianceStamped or Odometry")
 
 
 def inputs_from_args(args: argparse.Namespace, *, truth: bool = False) -> ReplayInputs:
     """The drive the arguments describe (truth events kept only with ``truth``)."""
     from roadpreview.apps.replay import ReplayInputs
     from roadpreview.camera import CameraModel
-    from roadpreview.errors import ConfigError
+    from roadpreview.errors import ConfigError, InputDataError
+    from roadpreview.sources.rosbag import is_bag
 
-    if args.input.is_dir():
-        inputs = ReplayInputs.from_recording(args.input)
+    path: Path = args.input
+    if not path.exists():
+        raise InputDataError(f"{path}: no such recording folder, video or bag")
+    if path.is_dir() and not is_bag(path):
+        inputs = ReplayInputs.from_recording(path)
         if not truth:
             inputs.truth_events = None
         return inputs
     if args.camera is None:
-        raise ConfigError("--camera: a camera calibration is needed for a video input")
+        raise ConfigError(f"--camera: a camera calibration is needed for {path}")
     if truth:
         raise ConfigError("--truth needs a simulator recording folder")
     return ReplayInputs(
-        video=args.input,
+        video=path,
         camera=CameraModel.load(args.camera),
         can_logs=list(args.can),
         imu_csv=args.imu_csv,
         frames_csv=args.frames_csv,
         video_start_s=args.video_start,
+        image_topic=args.image_topic,
+        imu_topic=args.imu_topic,
+        speed_topic=args.speed_topic,
+        can_offset_s=args.can_offset,
+        imu_offset_s=args.imu_offset,
     )

@@ -30,10 +30,16 @@ log = logging.getLogger(__name__)
 
 
 def make_decoder(dbc: str = "", mapping: str = "roadpreview") -> CanInputDecoder:
-    """The input decoder for a DBC file (empty: roadpreview's own) and a mapping (a file
-    or a shipped name); quantities the car does not provide are logged once."""
+    """The input decoder for a DBC file and a mapping (a file or a shipped name); without
+    a DBC, the one the mapping names when that file lies beside the mapping file, else
+    roadpreview's own. Quantities the car does not provide are logged once."""
+    input_mapping = load_mapping(mapping)
+    if not dbc and input_mapping.header.dbc not in ("", "roadpreview.dbc"):
+        beside = Path(input_mapping.source).parent / input_mapping.header.dbc
+        if beside.is_file():
+            dbc = str(beside)
     db = load_database(dbc or None, strict=not dbc)
-    decoder = CanInputDecoder(db, load_mapping(mapping), db_name=dbc or "roadpreview.dbc")
+    decoder = CanInputDecoder(db, input_mapping, db_name=dbc or "roadpreview.dbc")
     for quantity, why in decoder.missing.items():
         log.warning("CAN input: %s is not available (%s)", quantity, why)
     return decoder
@@ -54,6 +60,8 @@ class CanLogSource:
         self.decoder = decoder
         self.offset_s = offset_s
         self.out_of_order = 0  #: samples stamped before their predecessor (dropped)
+        self.frames = 0  #: frames read
+        self.samples = 0  #: samples decoded from them
         self._reader: CanLogReader | None = None
         self._closed = False
 
@@ -65,9 +73,11 @@ class CanLogSource:
     def __iter__(self) -> Iterator[InputSample]:
         self._reader = CanLogReader(self.path)
         last = -math.inf
+        self.frames = self.samples = 0
         for msg in self._reader:
             if self._closed:
                 return
+            self.frames += 1
             if msg.timestamp < last:
                 self.out_of_order += 1
                 log.warning(
@@ -79,7 +89,17 @@ class CanLogSource:
                 continue
             last = msg.timestamp
             for sample in self.decoder.decode(msg):
+                self.samples += 1
                 yield shifted(sample, self.offset_s)
+        if self.frames and not self.samples:
+            log.warning(
+                "%s: 0 of %d frames matched the DBC/mapping (%s, mapping %s): no IMU or speed"
+                " from this log; for another car give --dbc and --mapping",
+                self.path,
+                self.frames,
+                self.decoder.db_name,
+                self.decoder.mapping.source,
+            )
 
     def close(self) -> None:
         self._closed = True

@@ -7,6 +7,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from roadpreview.canbus.imu_csv import imu_samples, read_imu_csv
+from roadpreview.canbus.samples import ImuMeasurements
 from roadpreview.errors import InputDataError
 from roadpreview.sources import shifted
 from roadpreview.types import InputSample
@@ -24,14 +25,27 @@ class ImuCsvSource:
         if not self.path.is_file():
             raise InputDataError(f"{self.path}: IMU CSV not found")
         self.offset_s = offset_s
+        self._table: ImuMeasurements | None = None
         self._closed = False
 
     @property
     def errors(self) -> int:
         return 0  # the reader refuses a file without a valid row and logs skipped rows
 
+    @property
+    def table(self) -> ImuMeasurements:
+        """The file's rows, read once (its first time tells its clock before a replay)."""
+        if self._table is None:
+            self._table = read_imu_csv(self.path)
+        return self._table
+
+    @property
+    def first_s(self) -> float:
+        """The first time stamp as stored, s."""
+        return float(self.table.t_s[0])
+
     def __iter__(self) -> Iterator[InputSample]:
-        for s in imu_samples(read_imu_csv(self.path), source=str(self.path)):
+        for s in imu_samples(self.table, source=str(self.path)):
             if self._closed:
                 return
             yield shifted(s, self.offset_s)
