@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from roadpreview.camera import CameraModel
+from roadpreview.canbus.mapping import load_mapping
 from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.loop import Pace, RunSummary, run
 from roadpreview.pipeline.config import PipelineConfig
@@ -158,7 +159,9 @@ class ReplayInputs:
                 clock_of = LogClock(f"CAN log {path}", first, self.can_offset_s, "--can-offset")
                 logs.append((CanLogSource(path, decoder), clock_of))
         if self.imu_csv is not None:
-            imu = ImuCsvSource(self.imu_csv)
+            mapping = (config or PipelineConfig()).can.mapping  # a calibrated [mount], if any
+            mount = load_mapping(mapping).mount if mapping else None
+            imu = ImuCsvSource(self.imu_csv, mount=mount)
             clock_of = LogClock(
                 f"IMU CSV {self.imu_csv}", imu.first_s, self.imu_offset_s, "--imu-offset"
             )

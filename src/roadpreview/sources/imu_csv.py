@@ -1,5 +1,6 @@
 """A phone-style IMU CSV (``roadpreview.canbus.imu_csv`` reads the format) as a source of
-`ImuSample`, shifted by ``offset_s`` onto the pipeline's clock."""
+`ImuSample`, shifted by ``offset_s`` onto the pipeline's clock; with a calibrated ``mount``
+(a mapping's ``[mount]``, ``roadpreview calibrate``) turned into the car's axes first."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from roadpreview.canbus.imu_csv import imu_samples, read_imu_csv
-from roadpreview.canbus.samples import ImuMeasurements
+from roadpreview.canbus.samples import ImuMeasurements, ImuMount
 from roadpreview.errors import InputDataError
 from roadpreview.sources import shifted
 from roadpreview.types import InputSample
@@ -19,12 +20,15 @@ class ImuCsvSource:
 
     live = False
 
-    def __init__(self, path: str | Path, *, offset_s: float = 0.0) -> None:
+    def __init__(
+        self, path: str | Path, *, offset_s: float = 0.0, mount: ImuMount | None = None
+    ) -> None:
         self.path = Path(path)
         self.name = str(self.path)
         if not self.path.is_file():
             raise InputDataError(f"{self.path}: IMU CSV not found")
         self.offset_s = offset_s
+        self.mount = mount
         self._table: ImuMeasurements | None = None
         self._closed = False
 
@@ -45,7 +49,7 @@ class ImuCsvSource:
         return float(self.table.t_s[0])
 
     def __iter__(self) -> Iterator[InputSample]:
-        for s in imu_samples(self.table, source=str(self.path)):
+        for s in imu_samples(self.table, source=str(self.path), mount=self.mount):
             if self._closed:
                 return
             yield shifted(s, self.offset_s)
