@@ -1,11 +1,13 @@
 """CAN: the project's DBC and E2E protection, input decoding for any car, outputs, logs, live bus.
 
-* `dbc`: ``roadpreview.dbc`` (inputs; outputs ``RP_ALERT``, ``RP_STATUS``,
-  ``RP_ROAD_STATUS``, ``RP_ALERT_DETAIL``, ``RP_CONFIRM``), AUTOSAR E2E P01.
+* `dbc`: ``roadpreview.dbc`` (inputs; outputs ``RP_ALERT``, ``RP_ALERT_DETAIL``,
+  ``RP_ALERT_END``, ``RP_STATUS``, ``RP_ROAD_STATUS``, ``RP_CONFIRM``), AUTOSAR E2E P01.
 * `mapping` + `decode`: any car's DBC + a mapping file -> `ImuSample` / `SpeedSample`.
-* `imu_csv`: phone-style IMU CSV files.
+* `imu_csv`: phone-style IMU CSV files; `samples.ImuMount`: a calibrated IMU mount.
 * `output`: `Alert` / `ConfirmationResult` / `Status` -> E2E-protected frames, and back.
-* `logio`: CAN log files in every format python-can reads (BLF, ASC, candump, TRC, CSV, .gz).
+* `repetition`: each alert repeated with its distance and time to arrival as of the send
+  until the ego has passed the spot, then ``RP_ALERT_END`` (passed / cancelled).
+* `logio`: CAN log files in every format python-can reads (BLF, ASC, candump, TRC, CSV, MF4, SQLite, .gz).
 * `live`: python-can buses, a bounded-queue listener, a log played onto a bus.
 
 The names below are imported lazily (PEP 562): ``import roadpreview.canbus`` loads no
@@ -35,6 +37,9 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
     )
     from roadpreview.canbus.dbc import (
         RP_ALERT_DETAIL as RP_ALERT_DETAIL,
+    )
+    from roadpreview.canbus.dbc import (
+        RP_ALERT_END as RP_ALERT_END,
     )
     from roadpreview.canbus.dbc import (
         RP_CONFIRM as RP_CONFIRM,
@@ -136,6 +141,9 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
         AlertEncoder as AlertEncoder,
     )
     from roadpreview.canbus.output import (
+        AlertEndEncoder as AlertEndEncoder,
+    )
+    from roadpreview.canbus.output import (
         ConfirmEncoder as ConfirmEncoder,
     )
     from roadpreview.canbus.output import (
@@ -149,6 +157,9 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
     )
     from roadpreview.canbus.output import (
         ReceivedAlertDetail as ReceivedAlertDetail,
+    )
+    from roadpreview.canbus.output import (
+        ReceivedAlertEnd as ReceivedAlertEnd,
     )
     from roadpreview.canbus.output import (
         ReceivedConfirm as ReceivedConfirm,
@@ -174,11 +185,36 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
     from roadpreview.canbus.output import (
         detector_code as detector_code,
     )
+    from roadpreview.canbus.repetition import (
+        AlertEnd as AlertEnd,
+    )
+    from roadpreview.canbus.repetition import (
+        AlertRepeater as AlertRepeater,
+    )
+    from roadpreview.canbus.repetition import (
+        AlertSend as AlertSend,
+    )
+    from roadpreview.canbus.repetition import (
+        EndCause as EndCause,
+    )
+    from roadpreview.canbus.repetition import (
+        EndReason as EndReason,
+    )
+    from roadpreview.canbus.repetition import (
+        RepetitionConfig as RepetitionConfig,
+    )
+    from roadpreview.canbus.samples import (
+        ImuMount as ImuMount,
+    )
 
 #: public name -> the module that defines it
 _EXPORTS = {
     "AlertDetailEncoder": "roadpreview.canbus.output",
     "AlertEncoder": "roadpreview.canbus.output",
+    "AlertEnd": "roadpreview.canbus.repetition",
+    "AlertEndEncoder": "roadpreview.canbus.output",
+    "AlertRepeater": "roadpreview.canbus.repetition",
+    "AlertSend": "roadpreview.canbus.repetition",
     "BoundedQueueListener": "roadpreview.canbus.live",
     "CanInputDecoder": "roadpreview.canbus.decode",
     "CanLogReader": "roadpreview.canbus.logio",
@@ -187,10 +223,13 @@ _EXPORTS = {
     "DETECTOR_CODES": "roadpreview.canbus.output",
     "DecodeStats": "roadpreview.canbus.decode",
     "E2E_COUNTER_MODULUS": "roadpreview.canbus.dbc",
+    "EndCause": "roadpreview.canbus.repetition",
+    "EndReason": "roadpreview.canbus.repetition",
     "FrameProblem": "roadpreview.canbus.decode",
     "IMU_ACCEL": "roadpreview.canbus.dbc",
     "IMU_CSV_COLUMNS": "roadpreview.canbus.imu_csv",
     "IMU_RATES": "roadpreview.canbus.dbc",
+    "ImuMount": "roadpreview.canbus.samples",
     "InputMapping": "roadpreview.canbus.mapping",
     "LogProblem": "roadpreview.canbus.logio",
     "OutputDecoder": "roadpreview.canbus.output",
@@ -199,15 +238,18 @@ _EXPORTS = {
     "RESERVED_OUTPUT_IDS": "roadpreview.canbus.dbc",
     "RP_ALERT": "roadpreview.canbus.dbc",
     "RP_ALERT_DETAIL": "roadpreview.canbus.dbc",
+    "RP_ALERT_END": "roadpreview.canbus.dbc",
     "RP_CONFIRM": "roadpreview.canbus.dbc",
     "RP_ROAD_STATUS": "roadpreview.canbus.dbc",
     "RP_STATUS": "roadpreview.canbus.dbc",
     "ReceivedAlert": "roadpreview.canbus.output",
     "ReceivedAlertDetail": "roadpreview.canbus.output",
+    "ReceivedAlertEnd": "roadpreview.canbus.output",
     "ReceivedConfirm": "roadpreview.canbus.output",
     "ReceivedOutput": "roadpreview.canbus.output",
     "ReceivedRoadStatus": "roadpreview.canbus.output",
     "ReceivedStatus": "roadpreview.canbus.output",
+    "RepetitionConfig": "roadpreview.canbus.repetition",
     "RoadStatusEncoder": "roadpreview.canbus.output",
     "StatusEncoder": "roadpreview.canbus.output",
     "VEHICLE_SPEED": "roadpreview.canbus.dbc",
