@@ -7,7 +7,8 @@
 * `output`: `Alert` / `ConfirmationResult` / `Status` -> E2E-protected frames, and back.
 * `repetition`: each alert repeated with its distance and time to arrival as of the send
   until the ego has passed the spot, then ``RP_ALERT_END`` (passed / cancelled).
-* `logio`: CAN log files in every format python-can reads (BLF, ASC, candump, TRC, CSV, MF4, SQLite, .gz).
+* `logio`: CAN log files in every format python-can reads (BLF, ASC, candump, TRC, CSV,
+  MF4, SQLite, .gz).
 * `live`: python-can buses, a bounded-queue listener, a log played onto a bus.
 
 The names below are imported lazily (PEP 562): ``import roadpreview.canbus`` loads no
