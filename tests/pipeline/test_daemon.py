@@ -169,7 +169,6 @@ def test_daemon_on_virtual_bus_matches_the_replay(short_demo, tmp_path: Path) ->
     assert sum(isinstance(m, ReceivedAlertDetail) for m in logged) == len(summary.alerts)
 
 
-
 def test_stop_event_shuts_down_cleanly_and_closes_the_log(short_demo, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     channel = f"roadpreview-daemon-{uuid.uuid4().hex}"
     out_channel = f"roadpreview-daemon-out-{uuid.uuid4().hex}"

@@ -236,11 +236,11 @@ class StatusMonitor(Sink):
             self.drops = max(self.drops, frame.index + 1 - self.frames)
         self.alerts += len(result.alerts)
         if not self.ready:
-            self.ready = True
             if math.isnan(self.last_camera_mono):
                 self.last_camera_mono = now  # silent since the start: lost from here
             if self.on_ready is not None:
                 self.on_ready(frame)
+            self.ready = True  # after READY=1 went out: no WATCHDOG=1 before it
 
     def on_flush(self, t_s: float, alerts: Sequence[Alert], status: Status) -> None:
         self.alerts += len(alerts)
@@ -299,6 +299,12 @@ class SystemdNotifier:
         if self._notifier is not None:
             self._notifier.notify(state)
             self.sent += 1
+
+    def close(self) -> None:
+        """Close the socket (sdnotify leaves it open)."""
+        if self._notifier is not None and self._notifier.socket is not None:
+            self._notifier.socket.close()
+        self._notifier = None
 
     @staticmethod
     def watchdog_period_s(configured_s: float = 0.0) -> float:
@@ -602,6 +608,7 @@ class Daemon:
             supervisor_done.set()
             if supervisor is not None:
                 supervisor.join(timeout=5.0)
+            notifier.close()
             if self.player is not None:
                 self.player.stop()
             self._shutdown_buses()

@@ -75,6 +75,11 @@ def add_subparser(sub: Any) -> None:
         "speed; other than 1 only on the virtual interface (default: 1)",
     )
     p.add_argument(
+        "--frames-csv",
+        type=Path,
+        help="a video file as camera: its frame time stamps (frame,t_s); default: index / fps",
+    )
+    p.add_argument(
         "--keep-running",
         action="store_true",
         help="a video file as camera: keep running after it ends (the camera watchdog fires)",
@@ -143,6 +148,7 @@ def _run(args: argparse.Namespace) -> int:
         camera_start_s=args.source_start,
         alerts_log=args.alerts_log,
         frame_table=args.frame_table,
+        frames_csv=args.frames_csv,
         stop_at_end=not args.keep_running,
         can_log=args.can_log,
         can_log_loop=args.can_log_loop,
