@@ -271,10 +271,10 @@ class CanLogPlayer:
             shift: float | None = None  # receiver's clock minus the log's (first lap: unset)
             while not self._stop.is_set():
                 first, last, shift = self._lap(shift)
+                if self._stop.is_set():
+                    return
                 if math.isnan(first):
                     log.error("event=can_log_empty path=%s", self.path)
-                    return
-                if self._stop.is_set():
                     return
                 self.laps += 1
                 if not self.loop:
