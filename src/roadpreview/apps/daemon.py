@@ -1,9 +1,11 @@
 """The in-vehicle daemon (``roadpreview run``): a live camera and a CAN bus into the
 pipeline, alerts and the periodic status out on CAN. A composition of the run loop:
 
-* sources: the camera (`open_camera`: a device index or node, a stream URL, or a video
-  file / image folder played at its recorded pace) and the input bus (`CanBusSource`,
-  decoded through the DBC and the mapping as frames arrive);
+* sources: the camera (`open_camera`: a device index or node, a stream URL, a GStreamer
+  pipeline where OpenCV has GStreamer, or a video file / image folder played at its
+  recorded pace; ``[daemon] camera_width/height/fps`` requested, the calibration's size
+  required) and the input bus (`CanBusSource`, decoded through the DBC and the mapping as
+  frames arrive), optionally fed from a CAN log by a `CanLogPlayer` (``can_log``);
 * sinks: the output bus (`CanBusSink`: RP_ALERT + RP_ALERT_DETAIL per alert, RP_CONFIRM,
   RP_STATUS + RP_ROAD_STATUS every status period; send errors logged and counted), the
   sent frames optionally recorded to a CAN log, and structured log lines;
@@ -11,7 +13,10 @@ pipeline, alerts and the periodic status out on CAN. A composition of the run lo
   every status period, a vision failure for the fusion, so the status keeps going out)
   and the IMU (no gyro sample for ``can.imu_timeout_s``: logged and counted; the
   fusion's own gyro timeout turns the mode to VISUAL_ONLY);
-* signals: SIGINT/SIGTERM set `Daemon.stop_event` (`install_signal_handlers`).
+* signals: SIGINT/SIGTERM set `Daemon.stop_event` (`install_signal_handlers`);
+* operations: a status line every ``daemon.status_log_period_s`` (`StatusMonitor`) and
+  systemd ``Type=notify`` (`SystemdNotifier`): READY at the first frame, WATCHDOG pings
+  while frames go through, STATUS, STOPPING (docs/daemon.md).
 
 The clock: frame and CAN time stamps must be on one clock. A device or stream frame is
 stamped ``time.time()`` when read, as python-can stamps received frames on
