@@ -1,6 +1,7 @@
 """The daemon end to end without hardware: a video file as the camera (paced), a python-can
-``virtual`` bus fed at recorded pace with the recording's CAN log, alerts and status received
-on another bus object; checked against the replay of the same recording."""
+``virtual`` bus fed at recorded pace with the recording's CAN log by the daemon's own player
+(``can_log``, what ``run --can-log`` uses), alerts and status received on another bus object;
+checked against the replay of the same recording."""
 
 from __future__ import annotations
 
@@ -51,26 +52,6 @@ def _config(channel: str, out_channel: str = "") -> PipelineConfig:
     return replace(cfg, can=can_cfg)
 
 
-def _feeder(channel: str, log: Path, pace: Pace, stop: threading.Event) -> threading.Thread:
-    """Replay the CAN log on the bus, each frame sent when ``pace`` says its stamp is due
-    (the daemon's camera runs on the same clock); the stamps are kept (hardware stamping)."""
-
-    def run() -> None:
-        bus = open_bus("virtual", channel, preserve_timestamps=True)
-        try:
-            for msg in read_can_log(log):
-                pace.start(msg.timestamp)
-                if stop.wait(max(0.0, pace.due_in(msg.timestamp))):
-                    return
-                bus.send(msg)
-        finally:
-            bus.shutdown()
-
-    thread = threading.Thread(target=run, name="can-feeder", daemon=True)
-    thread.start()
-    return thread
-
-
 class _Collector:
     """Receive everything on a bus object (its own notifier) for decoding afterwards."""
 
@@ -100,9 +81,9 @@ def _run_in_thread(daemon: Daemon) -> tuple[threading.Thread, list[DaemonSummary
 
 def test_daemon_on_virtual_bus_matches_the_replay(short_demo, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """The daemon reading the video at recorded pace (half speed: no frame is dropped on a
-    loaded machine) with its CAN replayed on a virtual bus on the same clock gives exactly
-    the replay's frame table: the same frame time stamps, fusion inputs, modes, scores and
-    alerts."""
+    loaded machine) with its CAN log played onto a virtual bus on the same clock by its
+    player gives exactly the replay's frame table: the same frame time stamps, fusion
+    inputs, modes, scores and alerts."""
     channel = f"roadpreview-daemon-{uuid.uuid4().hex}"
     recorded_t0 = float(short_demo.info["can_t0_unix_s"])
     n_frames = int(short_demo.info["n_frames"])
@@ -122,15 +103,15 @@ def test_daemon_on_virtual_bus_matches_the_replay(short_demo, tmp_path: Path) ->
             pace=pace,
             alerts_log=tmp_path / "alerts.blf",
             frame_table=tmp_path / "daemon_frames.csv",
+            can_log=short_demo.can_log(),
+            video_start_s=recorded_t0,  # the log's stamps stay as recorded
         ),
     )
-    stop_feeder = threading.Event()
-    feeder = _feeder(channel, short_demo.can_log(), pace, stop_feeder)
     thread, box = _run_in_thread(daemon)
     thread.join(timeout=90.0)
     assert not thread.is_alive(), "the daemon did not stop at the end of the video"
-    stop_feeder.set()
-    feeder.join(timeout=10.0)
+    assert daemon.player is not None
+    assert not daemon.player.running  # stopped with the daemon
     received = collector.close()
     summary = box[0]
     assert summary.frames_dropped == 0, "the daemon fell behind half speed"
@@ -145,6 +126,9 @@ def test_daemon_on_virtual_bus_matches_the_replay(short_demo, tmp_path: Path) ->
     assert summary.can_input_errors == 0
     assert summary.can_queue_drops == 0
     assert summary.imu_timeouts == 0  # the gyro kept pace with the camera
+    assert summary.can_log_errors == 0
+    # the player sent the log up to the end of the video (and the daemon received it all)
+    assert summary.can_log_sent >= summary.can_frames > 0
 
     # the replay of the same recording: identical frame by frame, and the same alerts
     ref = replay(ReplayInputs.from_recording(short_demo.folder), out=tmp_path / "replay")
@@ -187,7 +171,6 @@ def test_daemon_on_virtual_bus_matches_the_replay(short_demo, tmp_path: Path) ->
     assert len({m.alert_id for m in logged if isinstance(m, ReceivedAlertDetail)}) == len(
         summary.alerts
     )
-
 
 
 def test_stop_event_shuts_down_cleanly_and_closes_the_log(short_demo, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]

@@ -1,9 +1,11 @@
 """The in-vehicle daemon (``roadpreview run``): a live camera and a CAN bus into the
 pipeline, alerts and the periodic status out on CAN. A composition of the run loop:
 
-* sources: the camera (`open_camera`: a device index or node, a stream URL, or a video
-  file / image folder played at its recorded pace) and the input bus (`CanBusSource`,
-  decoded through the DBC and the mapping as frames arrive);
+* sources: the camera (`open_camera`: a device index or node, a stream URL, a GStreamer
+  pipeline where OpenCV has GStreamer, or a video file / image folder played at its
+  recorded pace; ``[daemon] camera_width/height/fps`` requested, the calibration's size
+  required) and the input bus (`CanBusSource`, decoded through the DBC and the mapping as
+  frames arrive), optionally fed from a CAN log by a `CanLogPlayer` (``can_log``);
 * sinks: the output bus (`CanBusSink`: RP_ALERT + RP_ALERT_DETAIL per alert, RP_CONFIRM,
   RP_STATUS + RP_ROAD_STATUS every status period; send errors logged and counted), the
   sent frames optionally recorded to a CAN log, and structured log lines;
@@ -11,7 +13,10 @@ pipeline, alerts and the periodic status out on CAN. A composition of the run lo
   every status period, a vision failure for the fusion, so the status keeps going out)
   and the IMU (no gyro sample for ``can.imu_timeout_s``: logged and counted; the
   fusion's own gyro timeout turns the mode to VISUAL_ONLY);
-* signals: SIGINT/SIGTERM set `Daemon.stop_event` (`install_signal_handlers`).
+* signals: SIGINT/SIGTERM set `Daemon.stop_event` (`install_signal_handlers`);
+* operations: a status line every ``daemon.status_log_period_s`` (`StatusMonitor`) and
+  systemd ``Type=notify`` (`SystemdNotifier`): READY at the first frame, WATCHDOG pings
+  while frames go through, STATUS, STOPPING (docs/daemon.md).
 
 The clock: frame and CAN time stamps must be on one clock. A device or stream frame is
 stamped ``time.time()`` when read, as python-can stamps received frames on
@@ -28,15 +33,19 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
-from collections.abc import Iterator, Sequence
+import time
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import sdnotify
+
 from roadpreview.camera import CameraModel
-from roadpreview.canbus.live import open_bus
-from roadpreview.errors import OperationError
+from roadpreview.canbus.live import CanLogPlayer, open_bus
+from roadpreview.errors import ConfigError, InputDataError, OperationError
 from roadpreview.loop import FrameTimes, Pace, RunSummary, install_signal_handlers, run
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.pipeline import FrameResult, Pipeline
@@ -44,10 +53,21 @@ from roadpreview.sinks import Sink
 from roadpreview.sinks.can import CanBusSink, repetition_config
 from roadpreview.sinks.files import FrameTableSink
 from roadpreview.sources.can import CanBusSource, make_decoder
-from roadpreview.sources.video import CameraDeviceSource, camera_kind, open_camera
+from roadpreview.sources.video import (
+    CameraDeviceSource,
+    ImageSequenceSource,
+    VideoFileSource,
+    camera_kind,
+    open_camera,
+)
 from roadpreview.types import Alert, CameraFrame, FusionMode, ImuSample, Sample, Status
 
 log = logging.getLogger(__name__)
+
+#: a file camera fed by a CAN log player starts this long after it is opened (unless its
+#: start is given): the loop's threads and the player run before frame 0 is due, so the
+#: first frames cannot overtake the CAN frames stamped before them
+PLAYER_START_DELAY_S = 1.0
 
 
 def kv(event: str, **fields: Any) -> str:
@@ -175,6 +195,140 @@ class LogSink(Sink):
             )
 
 
+class StatusMonitor(Sink):
+    """The daemon's health as the loop sees it, and the periodic status line.
+
+    Every ``period_s`` on the frames' clock (hooked on the loop's status schedule) one
+    line ``event=status t=... mode=... fps=... frames=... drops=... alerts=...`` followed
+    by the daemon's own ``fields()`` (bus errors, CAN, IMU and camera state), logged and
+    handed to ``on_line``. ``fps`` counts the camera frames processed per second of the
+    frames' clock since the previous line; ``drops`` the camera frames read but not
+    processed (the gaps in their indices: the loop fell behind, or a frame came out of
+    order). ``on_ready`` is called once, at the first frame processed (a real one, or the
+    camera watchdog's image-less one when the camera is silent from the start).
+    `unhealthy` says why the watchdog pings should stop, if they should.
+    """
+
+    def __init__(
+        self,
+        period_s: float,
+        fields: Callable[[], dict[str, Any]] = dict,
+        *,
+        on_ready: Callable[[CameraFrame], None] | None = None,
+        on_line: Callable[[str], None] | None = None,
+    ) -> None:
+        self.period_s = period_s
+        self.fields = fields
+        self.on_ready = on_ready
+        self.on_line = on_line
+        self.frames = 0  #: camera frames processed (image-less injected ones not counted)
+        self.drops = 0  #: camera frames read but not processed
+        self.alerts = 0  #: alerts raised (flushed ones included)
+        self.lines = 0  #: status lines logged
+        self.ready = False
+        self.last_frame_mono = math.nan  #: time.monotonic() of the last frame processed
+        self.last_camera_mono = math.nan  #: ... of the last real camera frame processed
+        self._t0 = math.nan  # the previous line's frame time and frame count
+        self._frames0 = 0
+        self._next = -math.inf
+
+    def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
+        now = time.monotonic()
+        self.last_frame_mono = now
+        if frame.index >= 0:
+            self.frames += 1
+            self.last_camera_mono = now
+            self.drops = max(self.drops, frame.index + 1 - self.frames)
+        self.alerts += len(result.alerts)
+        if not self.ready:
+            if math.isnan(self.last_camera_mono):
+                self.last_camera_mono = now  # silent since the start: lost from here
+            if self.on_ready is not None:
+                self.on_ready(frame)
+            self.ready = True  # after READY=1 went out: no WATCHDOG=1 before it
+
+    def on_flush(self, t_s: float, alerts: Sequence[Alert], status: Status) -> None:
+        self.alerts += len(alerts)
+
+    def on_status(self, t_s: float, status: Status) -> None:
+        if self.period_s <= 0:
+            return
+        if math.isnan(self._t0):
+            self._t0, self._frames0, self._next = t_s, self.frames, t_s + self.period_s
+            return
+        if t_s < self._next:
+            return
+        fps = (self.frames - self._frames0) / (t_s - self._t0) if t_s > self._t0 else 0.0
+        self._t0, self._frames0, self._next = t_s, self.frames, t_s + self.period_s
+        line = kv(
+            "status",
+            t=t_s,
+            mode=status.mode.name,
+            fps=round(fps, 1),
+            frames=self.frames,
+            drops=self.drops,
+            alerts=self.alerts,
+            **self.fields(),
+        )
+        log.info(line)
+        self.lines += 1
+        if self.on_line is not None:
+            self.on_line(line)
+
+    def unhealthy(self, now_mono: float, stall_s: float, camera_lost_s: float = 0.0) -> str:
+        """Why the daemon is unhealthy at ``now_mono`` (``time.monotonic()``), or "": no
+        frame processed for ``stall_s`` (the loop hangs; a lost camera still gives an
+        image-less frame every status period), or no camera frame for ``camera_lost_s``
+        (0: never a reason)."""
+        if not self.ready:
+            return ""
+        silent = now_mono - self.last_frame_mono
+        if silent > stall_s:
+            return f"loop stalled: no frame processed for {silent:.1f} s"
+        lost = now_mono - self.last_camera_mono
+        if camera_lost_s > 0 and lost > camera_lost_s:
+            return f"camera lost for {lost:.1f} s"
+        return ""
+
+
+class SystemdNotifier:
+    """``sd_notify`` through sdnotify: READY, STATUS, WATCHDOG, STOPPING. Does nothing
+    when ``NOTIFY_SOCKET`` is unset (not started by systemd with ``Type=notify``)."""
+
+    def __init__(self) -> None:
+        self.enabled = bool(os.environ.get("NOTIFY_SOCKET"))
+        self._notifier = sdnotify.SystemdNotifier() if self.enabled else None
+        self.sent = 0  #: notifications sent
+
+    def notify(self, state: str) -> None:
+        if self._notifier is not None:
+            self._notifier.notify(state)
+            self.sent += 1
+
+    def close(self) -> None:
+        """Close the socket (sdnotify leaves it open)."""
+        if self._notifier is not None and self._notifier.socket is not None:
+            self._notifier.socket.close()
+        self._notifier = None
+
+    @staticmethod
+    def watchdog_period_s(configured_s: float = 0.0) -> float:
+        """The ping period: ``configured_s`` if set, else half of ``WATCHDOG_USEC`` (the
+        unit's ``WatchdogSec=``, when ``WATCHDOG_PID`` is unset or this process); 0: no
+        watchdog."""
+        if configured_s > 0:
+            return configured_s
+        pid = os.environ.get("WATCHDOG_PID", "")
+        if pid and pid != str(os.getpid()):
+            return 0.0
+        try:
+            usec = int(os.environ.get("WATCHDOG_USEC", "0"))
+        except ValueError:
+            log.warning(kv("watchdog_usec_invalid", value=os.environ.get("WATCHDOG_USEC", "")))
+            return 0.0
+        return usec / 2e6 if usec > 0 else 0.0
+
+
 # -- the daemon ---------------------------------------------------------------------------
 @dataclass(frozen=True)
 class DaemonOptions:
@@ -191,6 +345,16 @@ class DaemonOptions:
     alerts_log: Path | None = None  #: the output frames as sent (any python-can log format)
     frame_table: Path | None = None  #: the per-frame table (CSV), as a replay writes it
     stop_at_end: bool = True  #: a file camera: stop when it ends (else the camera is lost)
+    #: a CAN log played onto the input bus at recorded pace (`CanLogPlayer`), re-stamped
+    #: onto the daemon's clock: the bench without a car
+    can_log: Path | None = None
+    can_log_loop: bool = False  #: start the log over when it ends
+    #: the log's time stamp of the camera file's frame 0 (as ``replay --video-start``);
+    #: default: the log's first frame. A live camera: the log starts when the daemon does
+    video_start_s: float | None = None
+    #: a file camera (and its CAN log): play at this multiple of the recorded speed; the
+    #: time stamps stay on the recording's clock (``pace`` overrides it)
+    rate: float = 1.0
 
 
 @dataclass
@@ -210,6 +374,10 @@ class DaemonSummary:
     can_input_errors: int = 0  #: CAN frames the decoder skipped for a problem
     can_queue_drops: int = 0  #: CAN frames lost because the receive queue was full
     can_receive_errors: int = 0
+    can_log_sent: int = 0  #: frames the CAN log player sent (``can_log``)
+    can_log_errors: int = 0  #: its garbled, out-of-order and refused frames
+    status_lines: int = 0  #: periodic status lines logged
+    watchdog_withheld: int = 0  #: times the systemd watchdog pings were withheld (unhealthy)
     mode_changes: list[tuple[float, FusionMode, str]] = field(default_factory=list)
     seconds: float = 0.0
     interrupted: bool = False
@@ -232,6 +400,8 @@ class DaemonSummary:
             "can_input_errors": self.can_input_errors,
             "can_queue_drops": self.can_queue_drops,
             "can_receive_errors": self.can_receive_errors,
+            "can_log_sent": self.can_log_sent,
+            "can_log_errors": self.can_log_errors,
             "frame_ms_median": round(self.frame_ms.quantile(0.5), 2),
             "frame_ms_p99": round(self.frame_ms.quantile(0.99), 2),
             "frame_ms_max": round(self.frame_ms.max, 2),
@@ -259,23 +429,46 @@ class Daemon:
         self.pipeline = Pipeline(camera, cfg)
         self.summary = DaemonSummary()
         self.camera_source = opts.camera_source or cfg.daemon.camera_source
-        self.camera_kind = camera_kind(self.camera_source)
+        d = cfg.daemon
+        if d.watchdog_stall_s <= d.camera_timeout_s:
+            raise ConfigError(
+                f"[daemon] watchdog_stall_s = {d.watchdog_stall_s} s must exceed "
+                f"camera_timeout_s = {d.camera_timeout_s} s (a lost camera gives the loop "
+                "image-less frames only after that)"
+            )
+        if not opts.rate > 0:
+            raise ConfigError(f"rate {opts.rate}: must be positive")
+        start_s = opts.camera_start_s
+        if start_s is None and opts.can_log is not None:
+            start_s = time.time() + PLAYER_START_DELAY_S
         self.camera = open_camera(
             self.camera_source,
-            start_s=opts.camera_start_s,
+            start_s=start_s,
             frames_csv=opts.frames_csv,
-            reopen_s=cfg.daemon.camera_reopen_s,
+            reopen_s=d.camera_reopen_s,
+            device_width=d.camera_width,
+            device_height=d.camera_height,
+            device_fps=d.camera_fps,
+            expected_size=camera.size,
         )
         source = self.camera
+        if isinstance(source, CameraDeviceSource):
+            self.camera_kind = source.kind
+        else:
+            self.camera_kind = camera_kind(self.camera_source)
+        self._check_camera(camera)
         first_due = -math.inf if isinstance(source, CameraDeviceSource) else source.start_s
         self.camera_watchdog = CameraWatchdog(
             self.camera_source,
-            cfg.daemon.camera_timeout_s,
+            d.camera_timeout_s,
             cfg.can.status_period_s,
             start_s=first_due,
         )
         self.imu_watchdog = ImuWatchdog(cfg.can.imu_timeout_s)
+        self.pace = self._pace()
         c = cfg.can
+        self.player: CanLogPlayer | None = None
+        self.player_bus: Any = None
         self.input_bus = open_bus(c.input_interface, c.input_channel)
         self.output_bus = self.input_bus
         try:
@@ -284,26 +477,84 @@ class Daemon:
                     c.output_interface or c.input_interface, c.output_channel or c.input_channel
                 )
             decoder = make_decoder(c.dbc, c.mapping)
-            self.can_in = CanBusSource(
-                self.input_bus, decoder, queue_size=cfg.daemon.can_queue_size
-            )
+            self.can_in = CanBusSource(self.input_bus, decoder, queue_size=d.can_queue_size)
             self.output = CanBusSink(
                 self.output_bus,
                 detector=cfg.anomaly.detector,
                 record=opts.alerts_log,
                 repetition=repetition_config(cfg),
             )
+            if opts.can_log is not None:
+                self.player = self._player(opts.can_log)
         except BaseException:
             self._shutdown_buses()
+            self.camera.close()
             raise
+        self.monitor: StatusMonitor | None = None  #: the running daemon's health (`run`)
         self._ran = False
+
+    def _check_camera(self, camera: CameraModel) -> None:
+        """The camera settings apply to a device or stream, whose size must be the
+        calibration's: opened now to say so at once (if it is there: else it is retried
+        while running, a frame of another size then arriving without image)."""
+        d = self.config.daemon
+        cam = self.camera
+        cal = f"{camera.width}x{camera.height}"
+        if not isinstance(cam, CameraDeviceSource):
+            if d.camera_width or d.camera_height or d.camera_fps:
+                log.warning(
+                    kv("camera_settings_ignored", source=self.camera_source, kind=self.camera_kind)
+                )
+            if isinstance(cam, VideoFileSource):
+                cam.check_size(camera.size)
+            elif isinstance(cam, ImageSequenceSource) and cam.size not in ((0, 0), camera.size):
+                raise InputDataError(
+                    f"{cam.folder}: images are {cam.size[0]}x{cam.size[1]} but the camera "
+                    f"calibration is for {cal}"
+                )
+            return
+        if not cam.open():
+            log.error(
+                kv("camera_unavailable", source=self.camera_source, retry_s=d.camera_reopen_s)
+            )
+            return
+        if cam.size[0] > 0 and cam.size != camera.size:
+            cam.close()
+            raise ConfigError(
+                f"camera {self.camera_source!r} gives {cam.size[0]}x{cam.size[1]} frames but "
+                f"the calibration is for {cal}: set [daemon] camera_width/camera_height to "
+                "the calibration's size, or calibrate the camera at this size"
+            )
+
+    def _player(self, path: Path) -> CanLogPlayer:
+        """The CAN log player on its own bus object on the input channel, on the camera's
+        clock: a file camera's frame 0 is the log's ``video_start_s`` (default: its first
+        frame); with a live camera the log starts when the daemon does."""
+        c = self.config.can
+        virtual = c.input_interface == "virtual"
+        if self.pace is not None and self.pace.rate != 1.0 and not virtual:
+            raise ConfigError(
+                f"a pace of {self.pace.rate} x recorded speed needs the virtual CAN "
+                f"interface: {c.input_interface} stamps frames on arrival, on the wall clock"
+            )
+        self.player_bus = open_bus(
+            c.input_interface, c.input_channel, **({"preserve_timestamps": True} if virtual else {})
+        )
+        return CanLogPlayer(
+            path,
+            self.player_bus,
+            anchor_s=None if isinstance(self.camera, CameraDeviceSource) else self.camera.start_s,
+            anchor_log_s=self.options.video_start_s,
+            schedule=self.pace,
+            loop=self.options.can_log_loop,
+        )
 
     def _pace(self) -> Pace | None:
         """A file camera is released at its own time: the wall clock, unless set."""
         if isinstance(self.camera, CameraDeviceSource) or self.options.pace is not None:
             return self.options.pace
         start = self.camera.start_s
-        return Pace(1.0, t0=start, wall0=start)
+        return Pace(self.options.rate, t0=start, wall0=start)
 
     def run(self) -> DaemonSummary:
         """Process until stopped; return the summary (also logged)."""
@@ -323,27 +574,103 @@ class Daemon:
                 fusion=cfg.fusion.backend,
             )
         )
-        sinks: list[Sink] = [self.output, LogSink()]
+        d = cfg.daemon
+        notifier = SystemdNotifier()
+        self.monitor = monitor = StatusMonitor(
+            d.status_log_period_s,
+            self._status_fields,
+            on_ready=lambda frame: self._ready(notifier, frame),
+            on_line=lambda line: notifier.notify("STATUS=" + line.removeprefix("event=status ")),
+        )
+        sinks: list[Sink] = [self.output, LogSink(), monitor]
         if self.options.frame_table is not None:
             sinks.append(FrameTableSink(self.options.frame_table))
         result: RunSummary | None = None
+        supervisor_done = threading.Event()
+        supervisor: threading.Thread | None = None
+        ping_s = SystemdNotifier.watchdog_period_s(d.watchdog_ping_s) if notifier.enabled else 0.0
         try:
+            if ping_s > 0:
+                supervisor = threading.Thread(
+                    target=self._supervise,
+                    args=(notifier, monitor, ping_s, supervisor_done),
+                    name="systemd-watchdog",
+                    daemon=True,
+                )
+                supervisor.start()
+            if self.player is not None:
+                self.player.start()
             result = run(
                 [self.camera, self.can_in],
                 self.pipeline,
                 sinks,
-                pace=self._pace(),
+                pace=self.pace,
                 watchdogs=[self.camera_watchdog, self.imu_watchdog],
                 stop=self.stop_event,
                 status_period_s=cfg.can.status_period_s,
-                latency_s=cfg.daemon.can_latency_s,
+                latency_s=d.can_latency_s,
                 keep_running=not (self.options.stop_at_end and not self.camera.live),
             )
         finally:
+            notifier.notify("STOPPING=1")
+            supervisor_done.set()
+            if supervisor is not None:
+                supervisor.join(timeout=5.0)
+            notifier.close()
+            if self.player is not None:
+                self.player.stop()
             self._shutdown_buses()
             self._summarise(result)
             log.info(kv("daemon_stop", **self.summary.fields()))
         return self.summary
+
+    def _ready(self, notifier: SystemdNotifier, frame: CameraFrame) -> None:
+        """The first frame went through: systemd's READY=1 (the camera and the buses are
+        open, or the camera stayed silent for its timeout: then it says so)."""
+        camera = "ok" if frame.index >= 0 else "lost"
+        log.info(kv("ready", t=frame.t_s, camera=camera))
+        notifier.notify(f"READY=1\nSTATUS=running, first frame processed, camera {camera}")
+
+    def _supervise(
+        self,
+        notifier: SystemdNotifier,
+        monitor: StatusMonitor,
+        period_s: float,
+        done: threading.Event,
+    ) -> None:
+        """Ping systemd's watchdog every ``period_s`` while the loop is healthy
+        (`StatusMonitor.unhealthy`); withhold the pings (logged once) while it is not, so
+        systemd restarts a stalled daemon (``Restart=on-failure``)."""
+        d = self.config.daemon
+        withheld = ""
+        while not done.wait(period_s):
+            if not monitor.ready:
+                continue  # systemd starts the watchdog at READY=1
+            why = monitor.unhealthy(time.monotonic(), d.watchdog_stall_s, d.watchdog_camera_lost_s)
+            if not why:
+                notifier.notify("WATCHDOG=1")
+                if withheld:
+                    log.warning(kv("watchdog_resumed", after=withheld))
+                    withheld = ""
+            elif not withheld:
+                withheld = why
+                self.summary.watchdog_withheld += 1
+                log.error(kv("watchdog_withheld", reason=why))
+                notifier.notify(f"STATUS=unhealthy: {why}")
+
+    def _status_fields(self) -> dict[str, Any]:
+        """The daemon's part of the periodic status line (`StatusMonitor`)."""
+        fields: dict[str, Any] = {
+            "bus_errors": self.output.send_errors + self.can_in.receive_errors,
+            "can_in": self.can_in.frames,
+            "can_errors": self.can_in.decoder.stats.skipped + self.can_in.dropped,
+            "imu": "lost" if self.imu_watchdog.lost else "ok",
+            "camera": "lost" if self.camera_watchdog.lost else "ok",
+        }
+        if self.player is not None:
+            fields["can_log_sent"] = self.player.sent
+            fields["can_log_errors"] = self.player.errors
+        return fields
 
     def _summarise(self, r: RunSummary | None) -> None:
         s = self.summary
@@ -358,6 +685,10 @@ class Daemon:
             s.frame_ms = r.frame_ms
             s.can_queue_drops = r.queue_drops
         s.camera_read_failures = self.camera.errors
+        s.status_lines = self.monitor.lines if self.monitor is not None else 0
+        if self.player is not None:
+            s.can_log_sent = self.player.sent
+            s.can_log_errors = self.player.errors
         s.camera_timeouts = self.camera_watchdog.timeouts
         s.camera_gap_frames = self.camera_watchdog.gap_frames
         s.imu_timeouts = self.imu_watchdog.timeouts
@@ -369,6 +700,8 @@ class Daemon:
 
     def _shutdown_buses(self) -> None:
         buses = {id(self.input_bus): self.input_bus, id(self.output_bus): self.output_bus}
+        if self.player_bus is not None:
+            buses[id(self.player_bus)] = self.player_bus
         for bus in buses.values():
             try:
                 bus.shutdown()
@@ -392,6 +725,8 @@ def iter_summary_lines(summary: DaemonSummary) -> Iterator[str]:
         f"watchdogs: camera {s.camera_timeouts} timeout(s) ({s.camera_gap_frames} image-less "
         f"frames), IMU {s.imu_timeouts} timeout(s); {s.seconds:.1f} s"
     )
+    if s.can_log_sent or s.can_log_errors:
+        yield f"CAN log player: {s.can_log_sent} frames sent, {s.can_log_errors} errors"
     yield (
         f"processing per frame: median {s.frame_ms.quantile(0.5):.1f} ms, "
         f"99 % {s.frame_ms.quantile(0.99):.1f} ms, max {s.frame_ms.max:.1f} ms"
@@ -404,6 +739,8 @@ __all__ = [
     "DaemonOptions",
     "DaemonSummary",
     "ImuWatchdog",
+    "StatusMonitor",
+    "SystemdNotifier",
     "install_signal_handlers",
     "iter_summary_lines",
     "kv",

@@ -9,6 +9,9 @@
 * `CanReceiver` wires a ``can.Notifier`` to such a listener.
 * `replay` plays a recorded log onto a bus at its recorded pace
   (``can.MessageSync``), for bench tests of a receiver.
+* `CanLogPlayer` plays a log onto a bus in a thread of its own, re-stamped onto the
+  receiver's clock and paced by it (``roadpreview run --can-log``): the daemon is fed
+  from a log as from a car. Garbled frames and send errors are logged and counted.
 
 Sending roadpreview's outputs is `roadpreview.sinks.can.CanBusSink`: the run loop
 schedules the status for a bus and a log alike. Logging to a file: a ``can.Logger`` is
@@ -18,15 +21,19 @@ itself a listener; pass it to `CanReceiver` (``extra_listeners``).
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
+import time
 from collections.abc import Iterable
+from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Protocol
 
 import can
 
-from roadpreview.errors import ConfigError, MissingDependencyError, OperationError
+from roadpreview.canbus.logio import CanLogReader
+from roadpreview.errors import ConfigError, InputDataError, MissingDependencyError, OperationError
 
 log = logging.getLogger(__name__)
 
@@ -163,3 +170,178 @@ def replay(
             ) from None
         count += 1
     return count
+
+
+class Schedule(Protocol):
+    """When a time stamp is due: `roadpreview.loop.Pace` is one."""
+
+    def start(self, t0: float) -> None:
+        """Anchor the schedule at the first time stamp if it is not anchored yet."""
+        ...
+
+    def due_in(self, t: float) -> float:
+        """Seconds until time stamp ``t`` is due (negative: overdue)."""
+        ...
+
+
+class WallClock:
+    """The default `Schedule`: a time stamp is due at that Unix time."""
+
+    def start(self, t0: float) -> None:
+        pass
+
+    def due_in(self, t: float) -> float:
+        return t - time.time()
+
+
+class CanLogPlayer:
+    """Play a CAN log onto a bus from a thread, at its recorded pace, re-stamped.
+
+    A frame recorded at ``t`` is stamped ``t - anchor_log_s + anchor_s`` and sent when
+    ``schedule`` says that stamp is due: ``anchor_log_s`` (default: the log's first
+    frame) lines up with ``anchor_s`` on the receiver's clock (default: when `start` is
+    called). A bus that keeps the sender's stamps (python-can ``virtual`` with
+    ``preserve_timestamps=True``) hands them on as they are; a real bus stamps frames on
+    arrival, which is the same time when ``schedule`` is the wall clock. With ``loop``
+    the log starts over when it ends, each lap stamped one log span (plus ``lap_gap_s``)
+    later. A frame stamped before its predecessor is skipped, as the log sources do.
+
+    Nothing stops the thread but `stop`: garbled frames (the reader logs and skips
+    them), frames the bus refuses and skipped frames are logged and counted in
+    ``errors``; an unexpected failure is logged, counted and ends the playing only.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        bus: can.BusABC,
+        *,
+        anchor_s: float | None = None,
+        anchor_log_s: float | None = None,
+        schedule: Schedule | None = None,
+        loop: bool = False,
+        lap_gap_s: float = 0.01,
+    ) -> None:
+        self.path = Path(path)
+        CanLogReader(self.path)  # the suffix is checked here
+        if not self.path.is_file():
+            raise InputDataError(f"{self.path}: CAN log not found")
+        self.bus = bus
+        self.anchor_s = anchor_s
+        self.anchor_log_s = anchor_log_s
+        self.schedule: Schedule = schedule or WallClock()
+        self.loop = loop
+        self.lap_gap_s = lap_gap_s
+        self.sent = 0  #: frames sent
+        self.send_errors = 0  #: frames the bus refused
+        self.out_of_order = 0  #: frames stamped before their predecessor (skipped)
+        self.garbled = 0  #: garbled frames the reader skipped (all laps)
+        self.failures = 0  #: unexpected failures (each ended the playing)
+        self.laps = 0  #: times the log was played to its end
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def errors(self) -> int:
+        return self.send_errors + self.out_of_order + self.garbled + self.failures
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def start(self) -> None:
+        """Start playing (once)."""
+        if self._thread is not None:
+            raise OperationError(f"{self.path}: the player was started already")
+        if self.anchor_s is None:
+            self.anchor_s = time.time()
+        self._thread = threading.Thread(target=self._run, name="can-log-player", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Stop playing and wait for the thread (the bus stays its owner's)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            if self._thread.is_alive():
+                log.error("event=can_log_player_hangs path=%s", self.path)
+
+    def _run(self) -> None:
+        try:
+            shift: float | None = None  # receiver's clock minus the log's (first lap: unset)
+            while not self._stop.is_set():
+                first, last, shift = self._lap(shift)
+                if self._stop.is_set():
+                    return
+                if math.isnan(first):
+                    log.error("event=can_log_empty path=%s", self.path)
+                    return
+                self.laps += 1
+                if not self.loop:
+                    return
+                shift += last - first + self.lap_gap_s
+        except Exception:
+            self.failures += 1
+            log.exception("event=can_log_player_failed path=%s sent=%d", self.path, self.sent)
+        finally:
+            log.info(
+                "event=can_log_player_end path=%s laps=%d sent=%d errors=%d",
+                self.path,
+                self.laps,
+                self.sent,
+                self.errors,
+            )
+
+    def _lap(self, shift: float | None) -> tuple[float, float, float]:
+        """Play the log once: its first and last time stamps (NaN: no frame) and the shift
+        used (``shift``, or on the first lap the one the anchors give)."""
+        reader = CanLogReader(self.path)
+        first = last = math.nan
+        try:
+            for msg in reader:
+                if self._stop.is_set():
+                    break
+                t = float(msg.timestamp)
+                if math.isnan(first):
+                    first = last = t
+                    if shift is None:
+                        assert self.anchor_s is not None
+                        anchor_log = self.anchor_log_s if self.anchor_log_s is not None else t
+                        shift = self.anchor_s - anchor_log
+                elif t < last:
+                    self.out_of_order += 1
+                    if self.out_of_order <= 10 or self.out_of_order % 1000 == 0:
+                        log.warning(
+                            "event=can_log_out_of_order path=%s t=%.6f back_s=%.6f count=%d",
+                            self.path,
+                            t,
+                            last - t,
+                            self.out_of_order,
+                        )
+                    continue
+                last = t
+                assert shift is not None
+                msg.timestamp = t + shift
+                self.schedule.start(msg.timestamp)
+                wait = self.schedule.due_in(msg.timestamp)
+                if wait > 0 and self._stop.wait(wait):
+                    break
+                self._send(msg)
+        finally:
+            self.garbled += len(reader.problems)
+        return first, last, shift if shift is not None else 0.0
+
+    def _send(self, msg: can.Message) -> None:
+        try:
+            self.bus.send(msg)
+            self.sent += 1
+        except (can.CanError, OSError, ValueError) as exc:
+            self.send_errors += 1
+            if self.send_errors <= 10 or self.send_errors % 1000 == 0:
+                log.error(
+                    "event=can_log_send_failed path=%s id=0x%X count=%d error=%r",
+                    self.path,
+                    msg.arbitration_id,
+                    self.send_errors,
+                    exc,
+                )

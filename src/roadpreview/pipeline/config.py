@@ -124,6 +124,53 @@ class DaemonConfig:
         " before it (still in the driver or the notifier thread) are pushed first, as in a"
         " replay; small against the 1-2 s preview of an alert",
     )
+    camera_width: int = param(
+        0,
+        unit="px",
+        ge=0,
+        help="frame width requested from a device or stream after opening; 0: the camera's"
+        " default. Read back and logged; a refusal is a warning, a size other than the"
+        " calibration's an error",
+    )
+    camera_height: int = param(
+        0, unit="px", ge=0, help="frame height requested, as camera_width; 0: the default"
+    )
+    camera_fps: float = param(
+        0.0,
+        unit="1/s",
+        ge=0.0,
+        help="frame rate requested from a device or stream; 0: the camera's default",
+    )
+    status_log_period_s: float = param(
+        10.0,
+        unit="s",
+        ge=0.0,
+        help="one status log line (and systemd STATUS=) this often on the frames' clock:"
+        " mode, fps, drops, alerts, bus errors, IMU and camera; 0: never",
+    )
+    watchdog_ping_s: float = param(
+        0.0,
+        unit="s",
+        ge=0.0,
+        help="systemd WATCHDOG=1 ping period; 0: half of the unit's WatchdogSec"
+        " (WATCHDOG_USEC), no pings without it",
+    )
+    watchdog_stall_s: float = param(
+        2.0,
+        unit="s",
+        gt=0.0,
+        help="the loop processed no frame (not even the camera watchdog's image-less ones)"
+        " for this long: stalled, the pings stop so systemd restarts the daemon; must exceed"
+        " camera_timeout_s",
+    )
+    watchdog_camera_lost_s: float = param(
+        0.0,
+        unit="s",
+        ge=0.0,
+        help="the camera lost for this long also stops the pings (a hung driver that only a"
+        " restart frees); 0: never (the daemon reopens the camera itself and keeps sending"
+        " DEGRADED status)",
+    )
 
 
 @dataclass(frozen=True)

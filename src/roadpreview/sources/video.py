@@ -22,7 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from roadpreview.errors import InputDataError
+from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.types import CameraFrame, Image
 
 log = logging.getLogger(__name__)
@@ -130,41 +130,143 @@ class VideoFileSource:
 
 
 class CameraDeviceSource:
-    """A camera device (an index or ``/dev/video*``) or a stream URL, stamped with
-    ``time.time()`` when read; reopened ``reopen_s`` after a failure. Live."""
+    """A camera device (an index or ``/dev/video*``), a stream URL or a GStreamer pipeline,
+    stamped with ``time.time()`` when read; reopened ``reopen_s`` after a failure. Live.
+
+    Backends: ``/dev/videoN`` opens with V4L2; a source starting with ``gst:`` or holding
+    `` ! `` is a GStreamer pipeline (ending in ``appsink``), opened with GStreamer only if
+    this OpenCV build has it (`ConfigError` otherwise); anything else with OpenCV's
+    default (an index: V4L2 on Linux; a URL: FFmpeg). After each open, a non-zero
+    ``width``, ``height`` and ``fps`` are requested (``CAP_PROP_FRAME_WIDTH/HEIGHT/FPS``),
+    read back and logged, with a warning for each one the camera refused. A frame whose
+    size is not ``expected_size`` (the calibration's) is yielded without image and counted
+    in ``size_mismatches``: the pipeline's geometry holds for one size only.
+    """
 
     live = True
 
-    def __init__(self, source: str, *, reopen_s: float = 1.0) -> None:
+    def __init__(
+        self,
+        source: str,
+        *,
+        reopen_s: float = 1.0,
+        width: int = 0,
+        height: int = 0,
+        fps: float = 0.0,
+        expected_size: tuple[int, int] | None = None,
+    ) -> None:
         self.name = source
         self.source = source
         self.reopen_s = reopen_s
+        self.requested = {"width": width, "height": height, "fps": fps}  #: 0: the default
+        self.expected_size = expected_size
+        self.pipeline = self.gstreamer_pipeline(source)
+        if self.pipeline is not None and not self.gstreamer_available():
+            raise ConfigError(
+                f"camera {source!r}: a GStreamer pipeline, but this OpenCV build has no "
+                "GStreamer (cv2.getBuildInformation(): GStreamer NO; the opencv-python "
+                "wheels never have it): use /dev/videoN (V4L2) or a stream URL (FFmpeg), "
+                "or install an OpenCV built with GStreamer (e.g. the distribution's "
+                "python3-opencv, venv with --system-site-packages)"
+            )
+        if self.pipeline is not None:
+            self.kind, self.backend = "gstreamer", cv2.CAP_GSTREAMER
+        elif source.startswith("/dev/video"):
+            self.kind, self.backend = "device", cv2.CAP_V4L2
+        else:
+            self.kind = "device" if source.isdigit() else "stream"
+            self.backend = cv2.CAP_ANY
         self.read_failures = 0  #: reads that failed (each ends an open)
+        self.size_mismatches = 0  #: frames not of ``expected_size`` (yielded without image)
         self.opens = 0  #: successful opens
+        #: what the camera gave at the last open: (width, height) and fps (0: not reported)
+        self.size: tuple[int, int] = (0, 0)
+        self.fps = 0.0
+        self._cap: cv2.VideoCapture | None = None
         self._stop = threading.Event()
+
+    @staticmethod
+    def gstreamer_pipeline(source: str) -> str | None:
+        """The pipeline of a ``gst:`` source or one holding `` ! ``, else None."""
+        if source.startswith("gst:"):
+            return source[4:].strip()
+        return source if " ! " in source else None
+
+    @staticmethod
+    def gstreamer_available() -> bool:
+        """Whether this OpenCV build can open GStreamer pipelines (its build information
+        says ``GStreamer: YES``)."""
+        for line in cv2.getBuildInformation().splitlines():
+            key, _, value = line.strip().partition(":")
+            if key.strip() == "GStreamer":
+                return value.strip().upper().startswith("YES")
+        return False
 
     @property
     def errors(self) -> int:
-        return self.read_failures
+        return self.read_failures + self.size_mismatches
+
+    def open(self) -> bool:
+        """Open the camera now (else the first iteration does) and apply the settings;
+        False (logged) when it cannot be opened."""
+        if self._cap is None:
+            self._cap = self._open()
+        return self._cap is not None
 
     def _open(self) -> cv2.VideoCapture | None:
-        target: int | str = int(self.source) if self.source.isdigit() else self.source
-        cap = cv2.VideoCapture(target)
+        target: int | str = self.source
+        if self.pipeline is not None:
+            target = self.pipeline
+        elif self.source.isdigit():
+            target = int(self.source)
+        cap = cv2.VideoCapture(target, self.backend)
         if not cap.isOpened():
             cap.release()
             log.error("camera %s: cannot open", self.source)
             return None
         self.opens += 1
-        log.info("camera %s: opened", self.source)
+        self._apply_settings(cap)
         return cap
+
+    def _apply_settings(self, cap: cv2.VideoCapture) -> None:
+        """Request the non-zero settings, read everything back, log it; warn on refusals."""
+        props = {
+            "width": cv2.CAP_PROP_FRAME_WIDTH,
+            "height": cv2.CAP_PROP_FRAME_HEIGHT,
+            "fps": cv2.CAP_PROP_FPS,
+        }
+        for key, prop in props.items():
+            if self.requested[key] > 0:
+                cap.set(prop, float(self.requested[key]))
+        got = {key: float(cap.get(prop)) for key, prop in props.items()}
+        self.size = (int(got["width"]), int(got["height"]))
+        self.fps = got["fps"]
+        log.info(
+            "event=camera_opened source=%r backend=%s width=%d height=%d fps=%g",
+            self.source,
+            cap.getBackendName(),
+            self.size[0],
+            self.size[1],
+            self.fps,
+        )
+        for key, wanted in self.requested.items():
+            if wanted > 0 and abs(got[key] - wanted) > 0.01 * wanted:
+                log.warning(
+                    "event=camera_setting_refused source=%r setting=%s requested=%g actual=%g",
+                    self.source,
+                    key,
+                    wanted,
+                    got[key],
+                )
 
     def __iter__(self) -> Iterator[CameraFrame]:
         i = 0
         while not self._stop.is_set():
-            cap = self._open()
+            cap, self._cap = self._cap or self._open(), None
             if cap is None:
                 self._stop.wait(self.reopen_s)
                 continue
+            warned = False
             try:
                 while not self._stop.is_set():
                     ok, image = cap.read()
@@ -173,7 +275,21 @@ class CameraDeviceSource:
                         self.read_failures += 1
                         log.error("camera %s: frame %d cannot be read; reopening", self.source, i)
                         break
-                    yield CameraFrame(now, as_image(image), i)
+                    frame = as_image(image)
+                    size = (int(image.shape[1]), int(image.shape[0]))
+                    if self.expected_size is not None and size != self.expected_size:
+                        self.size_mismatches += 1
+                        frame = None
+                        if not warned:
+                            warned = True
+                            log.error(
+                                "camera %s: frames are %dx%d but the calibration is for %dx%d;"
+                                " frames without image until the camera is fixed",
+                                self.source,
+                                *size,
+                                *self.expected_size,
+                            )
+                    yield CameraFrame(now, frame, i)
                     i += 1
             finally:
                 cap.release()
@@ -266,15 +382,30 @@ def open_camera(
     frames_csv: str | Path | None = None,
     reopen_s: float = 1.0,
     fps: float = 10.0,
+    device_width: int = 0,
+    device_height: int = 0,
+    device_fps: float = 0.0,
+    expected_size: tuple[int, int] | None = None,
 ) -> VideoFileSource | CameraDeviceSource | ImageSequenceSource:
-    """The camera source for ``source`` (`camera_kind`). A file or an image folder starts
-    at ``start_s`` (default: now, so that it lines up with a live bus), its frames timed
-    by ``frames_csv`` when given."""
-    kind = camera_kind(source)
-    if kind in ("device", "stream"):
-        return CameraDeviceSource(source, reopen_s=reopen_s)
+    """The camera source for ``source``: a GStreamer pipeline
+    (`CameraDeviceSource.gstreamer_pipeline`) or a device or stream (`camera_kind`) is a
+    `CameraDeviceSource` with the ``device_*`` settings (0: the camera's default) and
+    ``expected_size``; a file or an image folder starts at ``start_s`` (default: now, so
+    that it lines up with a live bus), its frames timed by ``frames_csv`` when given."""
+    if CameraDeviceSource.gstreamer_pipeline(source) is not None or camera_kind(source) in (
+        "device",
+        "stream",
+    ):
+        return CameraDeviceSource(
+            source,
+            reopen_s=reopen_s,
+            width=device_width,
+            height=device_height,
+            fps=device_fps,
+            expected_size=expected_size,
+        )
     start = time.time() if start_s is None else start_s
-    if kind == "images":
+    if camera_kind(source) == "images":
         return ImageSequenceSource(source, fps=fps, start_s=start, frames_csv=frames_csv)
     return VideoFileSource(source, start_s=start, frames_csv=frames_csv)
 
