@@ -19,7 +19,7 @@ def test_the_mount_turns_the_chip_axes_into_the_car_axes(tmp_path: Path) -> None
     n = 200
     t = np.arange(n) / 100.0
     body_gyro = rng.normal(0.0, 0.05, (n, 3))  # ISO 8855 body rates, rad/s
-    body_acc = rng.normal(0.0, 0.5, (n, 3)) + [0.0, 0.0, 9.81]
+    body_acc = rng.normal(0.0, 0.5, (n, 3)) + np.array([0.0, 0.0, 9.81])
     R = Rotation.from_euler("ZYX", [90.0, 5.0, 0.0], degrees=True).as_matrix()  # body <- chip
     chip = ImuMeasurements(t + 0.060, body_gyro @ R, body_acc @ R)  # v_chip = R^T v_body
     path = tmp_path / "phone.csv"
