@@ -21,9 +21,9 @@ from roadpreview.apps.daemon import (
     Daemon,
     DaemonOptions,
     DaemonSummary,
-    StatusMonitor,
     iter_summary_lines,
 )
+from roadpreview.apps.monitoring import StatusMonitor
 from roadpreview.canbus import read_can_log
 from roadpreview.canbus.live import CanLogPlayer, open_bus
 from roadpreview.pipeline import FrameResult, PipelineConfig

@@ -14,7 +14,8 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import pytest
 
-from roadpreview.apps.daemon import Daemon, DaemonOptions, DaemonSummary, SystemdNotifier
+from roadpreview.apps.daemon import Daemon, DaemonOptions, DaemonSummary
+from roadpreview.apps.monitoring import SystemdNotifier
 from roadpreview.errors import ConfigError
 from roadpreview.pipeline import PipelineConfig
 from roadpreview.types import CameraFrame, Sample

@@ -97,6 +97,9 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
         BoundedQueueListener as BoundedQueueListener,
     )
     from roadpreview.canbus.live import (
+        CanLogPlayer as CanLogPlayer,
+    )
+    from roadpreview.canbus.live import (
         CanReceiver as CanReceiver,
     )
     from roadpreview.canbus.live import (
@@ -218,6 +221,7 @@ _EXPORTS = {
     "AlertSend": "roadpreview.canbus.repetition",
     "BoundedQueueListener": "roadpreview.canbus.live",
     "CanInputDecoder": "roadpreview.canbus.decode",
+    "CanLogPlayer": "roadpreview.canbus.live",
     "CanLogReader": "roadpreview.canbus.logio",
     "CanReceiver": "roadpreview.canbus.live",
     "ConfirmEncoder": "roadpreview.canbus.output",
