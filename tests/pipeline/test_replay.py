@@ -161,7 +161,7 @@ def test_sigint_during_replay_keeps_every_alert_emitted_so_far(short_demo, tmp_p
     out = tmp_path / "out"
     proc = subprocess.Popen(
         [sys.executable, "-m", "roadpreview", "replay", str(short_demo.folder),
-         "--out", str(out), "--pace", "1.0"],
+         "--out", str(out), "--pace", "0.5"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
