@@ -39,7 +39,7 @@ from dataclasses import dataclass, field, replace
 from types import FrameType
 from typing import Any, Protocol
 
-from roadpreview.fusion.mode_machine import mode_reason
+from roadpreview.fusion.mode_machine import gyro_state, mode_reason
 from roadpreview.pipeline.pipeline import FrameResult
 from roadpreview.pipeline.run_summary import FrameTimes, RunSummary
 from roadpreview.sinks import Sink
@@ -336,6 +336,7 @@ class _LoopState:
         self.last_t = -math.inf
         self.new_frame = False
         self.last_gyro_t = -math.inf  #: the newest gyro sample's time (mode reasons)
+        self.gyro_state = ""  #: the gyro's state at the last entry of ``mode_changes``
 
     def _status(self) -> Status:
         self.pipeline.input_errors = sum(s.errors for s in self.sources)
@@ -387,10 +388,13 @@ class _LoopState:
         summary.last_t = sample.t_s
         summary.last = r
         modes = summary.mode_changes
-        if not modes or modes[-1][1] != r.mode:
-            why = mode_reason(
-                r.mode, vision_failure=r.pitch_reason, gyro_age_s=r.t - self.last_gyro_t
-            )
+        gyro_age = r.t - self.last_gyro_t
+        gyro = gyro_state(gyro_age)
+        # a new entry when the mode changes, or when the gyro's state does (the reason of
+        # a VISUAL_ONLY that began before the first gyro sample would go stale)
+        if not modes or modes[-1][1] != r.mode or gyro != self.gyro_state:
+            why = mode_reason(r.mode, vision_failure=r.pitch_reason, gyro_age_s=gyro_age)
+            self.gyro_state = gyro
             modes.append((r.t, r.mode, why))
             log.info("event=mode_change t=%.3f mode=%s reason=%r", r.t, r.mode.name, why)
         summary.alerts.extend(r.alerts)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import io
+import itertools
 import json
 import math
 from dataclasses import replace
@@ -125,6 +126,12 @@ def test_mode_reasons_describe_their_mode(replayed: tuple[Path, dict[str, Any]])
     for c in changes:
         assert c["reason"].startswith(MODE_WORDS[FusionMode[c["mode"]]]), c
         assert "lead" not in c["reason"]  # the lead is not why the pitch mode is what it is
+    # the recording has an IMU at 100 Hz: "no IMU input" holds only until its first sample,
+    # and a reason is replaced when it stops being true, even if the mode stays
+    for c, nxt in itertools.pairwise(changes):
+        if "no IMU input" in c["reason"]:
+            assert nxt["t_rel_s"] - c["t_rel_s"] <= 0.1, changes
+    assert "no IMU input" not in changes[-1]["reason"]
 
 
 @pytest.mark.parametrize(

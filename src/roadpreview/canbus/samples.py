@@ -22,8 +22,6 @@ Array = NDArray[np.float64]
 RATE_SIGNS = np.array([1.0, -1.0, 1.0])
 
 
-
-
 @dataclass(frozen=True)
 class ImuMeasurements:
     """What an IMU delivers: stamped samples in its own axes (ISO 8855: x fwd, y left, z up)."""

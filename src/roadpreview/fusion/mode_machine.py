@@ -147,6 +147,14 @@ class ModeSupervisor:
         return self.mode
 
 
+def gyro_state(gyro_age_s: float, timeout_s: float = GyroConfig().timeout_s) -> str:
+    """The gyro as the mode reasons see it: ``"none"`` (no sample yet), ``"timed out"``
+    (newest sample older than ``timeout_s``) or ``"recent"``."""
+    if math.isinf(gyro_age_s):
+        return "none"
+    return "timed out" if gyro_age_s > timeout_s else "recent"
+
+
 def mode_reason(
     mode: FusionMode,
     *,
@@ -158,9 +166,10 @@ def mode_reason(
     frame's pitch vision failed ('' when it worked); ``gyro_age_s``, the frame time minus
     the newest gyro sample's (inf: none yet). The reason always describes ``mode`` (the
     frame's lead may be lost in any mode: that is not why the mode is what it is)."""
-    if math.isinf(gyro_age_s):
+    gyro = gyro_state(gyro_age_s, gyro_timeout_s)
+    if gyro == "none":
         imu = "no IMU input (no gyro sample so far)"
-    elif gyro_age_s > gyro_timeout_s:
+    elif gyro == "timed out":
         imu = f"gyro timed out (newest sample {gyro_age_s:.2f} s old)"
     else:
         imu = "gyro not fused (its time offset is still being estimated, or the back end has none)"
@@ -169,7 +178,7 @@ def mode_reason(
     else:
         vision = "vision not trusted (it disagreed with the gyro, or is re-validating)"
     if mode is _FUSED:
-        if math.isinf(gyro_age_s):
+        if gyro == "none":
             return "vision trusted; no gyro sample yet (start-up grace)"
         return "gyro and vision agree"
     if mode is _VISUAL_ONLY:

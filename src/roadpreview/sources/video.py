@@ -205,9 +205,7 @@ class ImageSequenceSource:
         self.name = str(self.folder)
         if not self.folder.is_dir():
             raise InputDataError(f"{self.folder}: image folder not found")
-        self.files = sorted(
-            p for p in self.folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES
-        )
+        self.files = sorted(p for p in self.folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
         if not self.files:
             raise InputDataError(f"{self.folder}: no images ({', '.join(IMAGE_SUFFIXES)})")
         if not fps > 0:
