@@ -148,3 +148,19 @@ def test_quiet_silences_the_progress_and_default_logs_it_off_a_terminal(
     assert lines, "no progress line when stderr is not a terminal"
     assert f"{n}/{n} frames (100.0 %)" in lines[-1]
     assert "fps" in lines[-1]
+
+
+def test_simulate_refuses_a_non_empty_out_unless_force(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "rec"
+    out.mkdir()
+    (out / "video.mp4").write_text("an earlier drive")
+    assert main(["simulate", "--out", str(out), "--write-scenario"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("roadpreview simulate: error: --out ")
+    assert "not empty" in err
+    assert (out / "video.mp4").read_text() == "an earlier drive"
+    assert main(["simulate", "--out", str(out), "--write-scenario", "--force", "-q"]) == 0
+    assert not (out / "video.mp4").exists()  # the stale recording file: deleted
+    assert (out / "scenario.toml").is_file()
