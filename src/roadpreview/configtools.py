@@ -205,3 +205,78 @@ def check_ranges(obj: Any, where: str = "") -> None:
             check_ranges(v, path)
         else:
             _check_range(v, f, path)
+
+
+def _range_text(m: Mapping[str, Any]) -> str:
+    bounds = [
+        f"{op} {m[key]}"
+        for key, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<="))
+        if m.get(key) is not None
+    ]
+    if m.get("choices") is not None:
+        return "one of: " + ", ".join(str(c) for c in m["choices"])
+    return "range: " + " and ".join(bounds) if bounds else ""
+
+
+def _field_comment(f: dataclasses.Field[Any], value: Any) -> list[str]:
+    """The comment lines above one field: its help, unit and allowed range."""
+    import textwrap
+
+    m = f.metadata
+    text = m.get("help") or (
+        "a table of options passed on to the chosen component (empty: its defaults)"
+        if isinstance(value, Mapping)
+        else f"{f.name.replace('_', ' ')}"
+    )
+    extras = [f"unit: {m['unit']}"] if m.get("unit") else []
+    if rng := _range_text(m):
+        extras.append(rng)
+    if extras:
+        text = f"{text} [{'; '.join(extras)}]"
+    return textwrap.wrap(
+        text, width=88, initial_indent="# ", subsequent_indent="# ", break_on_hyphens=False
+    )
+
+
+def commented_toml(obj: Any, *, header: str = "") -> str:
+    """A configuration dataclass as TOML with every field commented (its help, unit and
+    range from `param`), tables in field order; a field that is None is written
+    commented out. ``header``: comment lines at the top. Reading the text back gives
+    ``obj`` (`to_mapping` values)."""
+    import tomli_w
+
+    lines = [f"# {h}" if h else "#" for h in header.splitlines()]
+
+    def table(o: Any, where: str, doc: str) -> None:
+        scalars: list[str] = []
+        nested: list[tuple[str, Any, str]] = []
+        for f in dataclasses.fields(o):
+            v = getattr(o, f.name)
+            path = f"{where}.{f.name}" if where else f.name
+            if dataclasses.is_dataclass(v) and not isinstance(v, type):
+                nested.append((path, v, (type(v).__doc__ or "").strip().split("\n")[0]))
+                continue
+            if isinstance(v, Mapping):
+                nested.append((path, v, "\n".join(_field_comment(f, v))[2:]))
+                continue
+            scalars += _field_comment(f, v)
+            if v is None:
+                scalars.append(f"# {f.name} = (not set)")
+            else:
+                scalars.append(tomli_w.dumps({f.name: to_mapping(v)}).rstrip("\n"))
+        if where:
+            lines.append("")
+            lines.extend(f"# {d}" for d in doc.splitlines() if d)
+            lines.append(f"[{where}]")
+        lines.extend(scalars)
+        for path, v, d in nested:
+            if isinstance(v, Mapping):
+                lines.append("")
+                lines.append(f"# {d}")
+                lines.append(f"[{path}]")
+                lines.extend(tomli_w.dumps(to_mapping(dict(v))).splitlines())
+            else:
+                table(v, path, d)
+
+    table(obj, "", "")
+    return "\n".join(lines).strip("\n") + "\n"

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field, replace
 from types import FrameType
 from typing import Any, Protocol
 
+from roadpreview.fusion.mode_machine import gyro_state, mode_reason
 from roadpreview.pipeline.pipeline import FrameResult
 from roadpreview.pipeline.run_summary import FrameTimes, RunSummary
 from roadpreview.sinks import Sink
@@ -334,6 +335,8 @@ class _LoopState:
         self.next_status = -math.inf
         self.last_t = -math.inf
         self.new_frame = False
+        self.last_gyro_t = -math.inf  #: the newest gyro sample's time (mode reasons)
+        self.gyro_state = ""  #: the gyro's state at the last entry of ``mode_changes``
 
     def _status(self) -> Status:
         self.pipeline.input_errors = sum(s.errors for s in self.sources)
@@ -352,6 +355,8 @@ class _LoopState:
         summary = self.summary
         if not isinstance(sample, CameraFrame):
             assert isinstance(sample, ImuSample | SpeedSample)
+            if isinstance(sample, ImuSample) and math.isfinite(sample.pitch_rate_rad_s):
+                self.last_gyro_t = max(self.last_gyro_t, sample.t_s)
             self.pipeline.push(sample)
             summary.samples += 1
             for wd in watchdogs:
@@ -383,8 +388,13 @@ class _LoopState:
         summary.last_t = sample.t_s
         summary.last = r
         modes = summary.mode_changes
-        if not modes or modes[-1][1] != r.mode:
-            why = r.pitch_reason or r.vision_reason
+        gyro_age = r.t - self.last_gyro_t
+        gyro = gyro_state(gyro_age)
+        # a new entry when the mode changes, or when the gyro's state does (the reason of
+        # a VISUAL_ONLY that began before the first gyro sample would go stale)
+        if not modes or modes[-1][1] != r.mode or gyro != self.gyro_state:
+            why = mode_reason(r.mode, vision_failure=r.pitch_reason, gyro_age_s=gyro_age)
+            self.gyro_state = gyro
             modes.append((r.t, r.mode, why))
             log.info("event=mode_change t=%.3f mode=%s reason=%r", r.t, r.mode.name, why)
         summary.alerts.extend(r.alerts)

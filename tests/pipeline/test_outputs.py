@@ -6,6 +6,7 @@ and by `OutputDecoder`."""
 from __future__ import annotations
 
 import itertools
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +30,7 @@ from roadpreview.canbus import (
 )
 from roadpreview.errors import ConfigError
 from roadpreview.pipeline import FrameResult
+from roadpreview.pipeline.run_summary import RunSummary
 from roadpreview.sinks.can import CanMemorySink
 from roadpreview.types import (
     Alert,
@@ -225,3 +227,33 @@ def test_a_status_at_its_defaults_and_no_confirmations_still_write() -> None:
 def test_an_unknown_detector_fails_when_the_log_is_built() -> None:
     with pytest.raises(ConfigError, match="'cnn'"):
         CanMemorySink(detector="cnn")
+
+
+@pytest.mark.parametrize("suffix", [".blf", ".asc", ".log"])
+def test_the_log_and_alerts_jsonl_are_on_disk_as_the_alerts_happen(
+    tmp_path: Path, suffix: str
+) -> None:
+    """While the run goes on (the sinks still open), a reader already finds each alert in
+    the CAN log and in alerts.jsonl: an interrupt or a crash cannot lose it."""
+    from roadpreview.sinks.can import CanLogSink
+    from roadpreview.sinks.files import AlertsJsonlSink
+
+    log_path, jsonl_path = tmp_path / f"alerts{suffix}", tmp_path / "alerts.jsonl"
+    can_sink, jsonl_sink = CanLogSink(log_path), AlertsJsonlSink(jsonl_path)
+    alerts_on_disk = []
+    for k in range(60):
+        t = T0 + k / 30
+        alerts = [_alert(1 + k // 20, t, 30.0)] if k % 20 == 5 else []
+        result = cast(FrameResult, _Result(t, alerts, []))
+        for sink in (can_sink, jsonl_sink):
+            sink.on_frame(CameraFrame(t, None), result, _status(k))
+        if k % 10 == 0:
+            can_sink.on_status(t, _status(k))
+        if alerts:
+            ids = [m.data[2] for m in read_can_log(log_path) if m.arbitration_id == 0x200]
+            lines = jsonl_path.read_text().splitlines()
+            alerts_on_disk.append((ids, [json.loads(x)["alert_id"] for x in lines]))
+    assert alerts_on_disk == [([1], [1]), ([1, 2], [1, 2]), ([1, 2, 3], [1, 2, 3])]
+    can_sink.close(RunSummary())
+    jsonl_sink.close(RunSummary())
+    assert len([m for m in read_can_log(log_path) if m.arbitration_id == 0x200]) == 3

@@ -376,9 +376,7 @@ class TwoAxleConfig:
         help="the ego is jolted (its own anomaly) when its band-passed vertical acceleration"
         " peaks at this many times its background (`roadpreview.ego`) ...",
     )
-    jolt_min_mps2: float = param(
-        1.5, unit="m/s^2", ge=0, le=50, help="... and at least this much"
-    )
+    jolt_min_mps2: float = param(1.5, unit="m/s^2", ge=0, le=50, help="... and at least this much")
     jolt_mask_s: tuple[float, float] = param(
         (0.1, 0.25),
         unit="s",
@@ -420,8 +418,7 @@ class TwoAxleConfig:
         unit="",
         gt=0,
         le=1,
-        help="durations whose score is within this fraction of the best spread the height's"
-        " std",
+        help="durations whose score is within this fraction of the best spread the height's std",
     )
     confidence_logit: tuple[float, float] = param(
         (-0.75, 6.84),

@@ -11,16 +11,16 @@ far; the summary then says ``"interrupted": true``.
 
 from __future__ import annotations
 
-import json
 import logging
 import math
-import sys
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from roadpreview.apps.progress import Progress
+from roadpreview.apps.summary import write_summary
 from roadpreview.camera import CameraModel
 from roadpreview.canbus.mapping import load_mapping
 from roadpreview.errors import ConfigError, InputDataError
@@ -59,7 +59,8 @@ from roadpreview.sources.rosbag import (
     is_bag,
 )
 from roadpreview.sources.video import VideoFileSource, frame_times
-from roadpreview.types import Alert, Confirmation, ConfirmationResult, FusionMode, RoadState
+from roadpreview.sources.window import WindowedSource
+from roadpreview.types import Alert, ConfirmationResult, FusionMode, RoadState
 
 log = logging.getLogger(__name__)
 
@@ -248,6 +249,19 @@ class ReplayResult:
         return sum(n for name, n in errors.items() if name != self.video_name)
 
 
+#: the files `replay` writes into its output folder
+OUTPUT_FILES = (
+    "alerts.blf",
+    "alerts.jsonl",
+    "alerts.jsonl.tmp",
+    "frames.csv",
+    "plots.png",
+    "summary.json",
+    "summary.json.tmp",
+    "annotated.mp4",
+)
+
+
 def replay(
     inputs: ReplayInputs,
     config: PipelineConfig | None = None,
@@ -255,15 +269,28 @@ def replay(
     *,
     annotated_video: bool = False,
     keep_results: bool = False,
-    progress: Callable[[int, float], None] | None = None,
+    progress: Progress | Callable[[int, float], None] | None = None,
     max_frames: int | None = None,
     pace: Pace | None = None,
     stop: threading.Event | None = None,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    more_inputs: Sequence[Path] = (),
 ) -> ReplayResult:
-    """Run the pipeline over the inputs; write the outputs into ``out`` (if given)."""
+    """Run the pipeline over the inputs; write the outputs into ``out`` (if given).
+
+    ``start_s`` / ``end_s``: only the part of the drive between these times, in seconds
+    from the video's frame 0 (`WindowedSource`). ``progress``: called with (frames, wall
+    seconds) as the run goes; a `Progress` is also told the number of frames to expect."""
     config = config or PipelineConfig()
     video, sources = inputs.sources(config)
     start = video.start_s
+    if start_s is not None or end_s is not None:
+        lo = -math.inf if start_s is None else start + start_s
+        hi = math.inf if end_s is None else start + end_s
+        if not lo < hi:
+            raise ConfigError(f"--start {start_s} s must be before --end {end_s} s")
+        sources = [WindowedSource(s, lo, hi) for s in sources]
     pipeline = Pipeline(inputs.camera, config)
     out_dir = Path(out) if out is not None else None
     sinks: list[Sink] = []
@@ -282,7 +309,7 @@ def replay(
             if e.get("lead_front_t_s") is not None and e.get("lead_hits")
         ]
         sinks += [
-            FrameTableSink(out_dir / "frames.csv"),
+            FrameTableSink(out_dir / "frames.csv", t0=start),
             CanLogSink(
                 out_dir / "alerts.blf",
                 detector=config.anomaly.detector,
@@ -293,22 +320,36 @@ def replay(
         ]
         if annotated_video:
             sinks.append(AnnotatedVideoSink(out_dir / "annotated.mp4", video.fps, video.size))
-    summary = run(
-        sources,
-        pipeline,
-        sinks,
-        pace=pace,
-        stop=stop,
-        status_period_s=config.can.status_period_s,
-        max_frames=max_frames,
-        progress=progress,
-    )
+    if isinstance(progress, Progress):
+        progress.start(expected_frames(video, start_s, end_s, max_frames))
+    try:
+        summary = run(
+            sources,
+            pipeline,
+            sinks,
+            pace=pace,
+            stop=stop,
+            status_period_s=config.can.status_period_s,
+            max_frames=max_frames,
+            progress=progress,
+        )
+    except BaseException:
+        if isinstance(progress, Progress):
+            progress.close()
+        raise
+    if isinstance(progress, Progress):
+        progress.close(summary.frames)
     if summary.frames == 0:
-        raise InputDataError(f"{inputs.video}: no frame could be read")
+        window = "" if start_s is None and end_s is None else " in the --start/--end window"
+        raise InputDataError(f"{inputs.video}: no frame could be read{window}")
     match = None
     if inputs.truth_events is not None:
+        events = inputs.truth_events
         duration = inputs.duration_s or (summary.last_t - start)
-        match = match_alerts(summary.alerts, inputs.truth_events, t0=start, duration_s=duration)
+        if start_s is not None or end_s is not None:  # the events of the window only
+            duration = summary.last_t - summary.first_t
+            events = [e for e in events if _in_window(e, start, summary)]
+        match = match_alerts(summary.alerts, events, t0=start, duration_s=duration)
     result = ReplayResult(
         run=summary,
         video_start_s=start,
@@ -318,46 +359,52 @@ def replay(
         video_name=video.name,
     )
     if out_dir is not None:
-        write_summary(out_dir / "summary.json", result, config)
+        files = [*input_files(inputs, sources), *more_inputs]
+        write_summary(out_dir / "summary.json", result, config, files=files)
     return result
 
 
-def write_summary(path: Path, result: ReplayResult, config: PipelineConfig) -> None:
-    """``summary.json``: counts, modes (times from the video's start), detector, road class,
-    confirmations, and the truth match when there is one."""
-    s = result.run
-    start = result.video_start_s
-    summary: dict[str, Any] = {
-        "frames": s.frames,
-        "seconds": round(s.seconds, 3),
-        "fps": round(s.fps, 2),
-        "alerts": len(s.alerts),
-        "interrupted": s.interrupted,
-        "video_decode_failures": result.decode_failures,
-        "can_input_errors": result.input_errors,
-        "frames_out_of_order": s.frames_out_of_order,
-        "mode_changes": [
-            {"t_s": round(t - start, 3), "mode": m.name, "reason": why}
-            for t, m, why in s.mode_changes
-        ],
-        "detector": config.anomaly.detector,
-        "road_class": result.road.iso_class,
-        "road_class_ego": result.road.ego_class,
-        "road_class_lead": result.road.lead_class,
-        "confirmations": {
-            c.name: sum(x.outcome is c for x in s.confirmations) for c in Confirmation
-        },
-        "pending_confirmations": len(s.alerts) - len(s.confirmations),
-    }
-    match = result.match
-    if match is not None:
-        summary["truth"] = {
-            "expected": match.expected,
-            "hits": match.hits,
-            "false_alarms": len(match.false_alarms),
-            "false_alarms_per_min": match.false_alarms_per_min,
-        }
-    path.write_text(json.dumps(summary, indent=2))
+def _in_window(event: dict[str, Any], start: float, summary: RunSummary) -> bool:
+    """Whether the lead crosses the true ``event`` within the frames the replay saw."""
+    t = event.get("lead_front_t_s")
+    if t is None or math.isnan(summary.first_t):
+        return True
+    return bool(summary.first_t <= start + float(t) <= summary.last_t)
+
+
+def expected_frames(
+    video: VideoFileSource | BagCameraSource,
+    start_s: float | None,
+    end_s: float | None,
+    max_frames: int | None,
+) -> int | None:
+    """About how many frames a replay of ``video`` (cut to the window) will process."""
+    n = video.n_frames
+    if n <= 0:
+        return max_frames
+    first = 0 if start_s is None else max(0, math.ceil(start_s * video.fps - 1e-6))
+    last = n if end_s is None else min(n, math.floor(end_s * video.fps + 1e-6) + 1)
+    total = max(0, last - first)
+    return total if max_frames is None else min(total, max_frames)
+
+
+def input_files(inputs: ReplayInputs, sources: Sequence[Source]) -> list[Path]:
+    """The files a replay reads: every file source, the frame time stamps, and the
+    recording's calibration and truth when the video sits in a recording folder."""
+    paths: list[Path] = []
+    for s in sources:
+        inner = getattr(s, "source", s)  # a WindowedSource's
+        path = getattr(inner, "path", None) or Path(s.name)
+        if isinstance(path, Path) and path.is_file():
+            paths.append(path)
+    frames_csv = getattr(inputs, "frames_csv", None)
+    if frames_csv is not None:
+        paths.append(Path(frames_csv))
+    folder = Path(inputs.video).parent
+    for name in ("camera.toml", "scenario.toml", "truth.json"):
+        if (folder / name).is_file() and inputs.truth_events is not None:
+            paths.append(folder / name)
+    return paths
 
 
 def format_alerts(
@@ -385,13 +432,6 @@ def format_alerts(
     return "\n".join(lines) if alerts else "   (none)"
 
 
-def print_progress(frames: int, seconds: float) -> None:
-    """A one-line progress display on stderr (frames and frames per second)."""
-    if sys.stderr.isatty():
-        print(
-            f"\r  {frames} frames, {frames / max(seconds, 1e-9):5.1f} fps", end="", file=sys.stderr
-        )
-
-
 def format_modes(modes: Sequence[tuple[float, FusionMode, str]], start: float) -> str:
-    return "\n".join(f"  {t - start:7.2f} s  {m.name:11s} {why}" for t, m, why in modes)
+    """The mode changes, one a line, times in seconds from ``start`` (the video's frame 0)."""
+    return "\n".join(f"  {t - start:8.2f} s  {m.name:11s} {why}" for t, m, why in modes)

@@ -87,7 +87,5 @@ def run(repeats: int | None = None, quick: bool = False, seed: int = 0) -> str:
                 ]
             )
     head = ["detector", "fps", "ms / frame", "frames / s", "events", "target"]
-    title = (
-        f"bench detector: {duration:.0f} s synthetic trajectory, 14-15 bumps, median of {reps}"
-    )
+    title = f"bench detector: {duration:.0f} s synthetic trajectory, 14-15 bumps, median of {reps}"
     return title + "\n" + format_table(head, rows)

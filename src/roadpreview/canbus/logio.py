@@ -67,7 +67,7 @@ from pathlib import Path
 from typing import IO, Any, Literal, TextIO, cast
 
 import can
-from can.io.blf import BLFParseError
+from can.io.blf import BLFParseError, BLFWriter
 from can.io.generic import MessageWriter
 
 from roadpreview.errors import (
@@ -213,6 +213,19 @@ class CanLogWriter:
         self._writer.on_message_received(msg)
         self._last = ts
         self.count += 1
+
+    def flush(self) -> None:
+        """Put every frame written so far into the file, so that a reader sees it while
+        the log is still open: a BLF writer's open container is compressed and written
+        (python-can otherwise waits for 128 KiB of frames), a text log's buffer flushed."""
+        writer = self._writer
+        if writer is None:
+            return
+        if isinstance(writer, BLFWriter):
+            writer._flush()  # python-can's own container write; no public call does it
+        file = getattr(writer, "file", None)
+        if file is not None and not file.closed:
+            file.flush()
 
     def close(self) -> None:
         """Flush and close (idempotent)."""

@@ -16,7 +16,7 @@ def add_subparser(sub: Any) -> None:
     )
     p.add_argument("name", choices=[*BENCHMARKS, "all"], help="which benchmark")
     p.add_argument(
-        "--repeats", type=int, default=None, help="repeats per case (default: per bench)"
+        "--repeats", type=int, default=None, help="repeats per case; default: each bench's own"
     )
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes (smoke run)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the synthetic inputs")

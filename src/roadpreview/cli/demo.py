@@ -19,20 +19,35 @@ def add_subparser(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "demo", help="simulate the demo drive and replay it through the default pipeline"
     )
-    p.add_argument("--out", type=Path, default=Path("runs/demo"), help="working folder")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("runs/demo"),
+        metavar="DIR",
+        help="working folder: the drive in DIR/recording (reused when it is the same drive),"
+        " the replay's outputs in DIR/replay (replaced at each run)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the demo drive")
-    p.add_argument("--duration", type=float, default=None, help="shorten the drive (s)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="shorten the drive to S seconds; default: the preset's 60 s",
+    )
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
+    from roadpreview.apps.progress import Progress
     from roadpreview.apps.replay import (
+        OUTPUT_FILES,
         ReplayInputs,
         format_alerts,
         format_modes,
-        print_progress,
         replay,
     )
+    from roadpreview.cli._output import prepare_output_folder
     from roadpreview.sim.dataset import drive_config
     from roadpreview.sim.recording import write_recording
     from roadpreview.sim.scenario import ScenarioConfig
@@ -57,11 +72,16 @@ def _run(args: argparse.Namespace) -> int:
         print(f"  {info.n_frames} frames, {info.n_can_frames} CAN frames in {info.seconds:.1f} s")
     inputs = ReplayInputs.from_recording(rec_dir)
     out = args.out / "replay"
+    prepare_output_folder(out, force=True, ours=OUTPUT_FILES, say=None)  # the last replay
     print(
         "replaying it through the default pipeline (motion finder, robust pitch, kalman, heave) ..."
     )
-    result = replay(inputs, None, out, progress=print_progress)
-    print("\n\nanomalies the lead crossed, against the truth:")
+    progress = Progress("replay", enabled=getattr(args, "verbosity", 0) >= 0)
+    result = replay(inputs, None, out, progress=progress)
+    print(
+        f"\ntimes below: seconds from the video's frame 0 (Unix time {result.video_start_s:.3f} s)"
+    )
+    print("\nanomalies the lead crossed, against the truth:")
     assert result.match is not None
     print(result.match.table())
     print("\nalerts (what RP_ALERT carried, and what the ego felt when it got there):")

@@ -28,16 +28,23 @@ def add_subparser(sub: Any) -> None:
         help="a small, fast configuration (few short drives at 640x360): the test suite's",
     )
     p.add_argument(
-        "--out", type=Path, default=None, help="run folder (default runs/eval or runs/eval-quick)"
+        "--out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="run folder, also the cache of recordings and traces: a second run reuses"
+        " them (--fresh recomputes the traces); default: runs/eval, or runs/eval-quick",
     )
-    p.add_argument("--report", type=Path, default=None, help="write the Markdown report here")
-    p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument(
+        "--report", type=Path, default=None, metavar="FILE", help="write the Markdown report here"
+    )
+    p.add_argument("--jobs", type=int, default=2, help="worker processes")
     p.add_argument(
         "--experiments",
         default="all",
-        help="comma-separated subset of e1,e2,e3,e4,e5 (default: all)",
+        help="comma-separated subset of e1,e2,e3,e4,e5, or all",
     )
-    p.add_argument("--seed", type=int, default=0, help="base seed of the data sets (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="base seed of the data sets")
     p.add_argument("--config", type=Path, help="pipeline configuration (TOML) for every method")
     p.add_argument(
         "--fresh", action="store_true", help="recompute every trace (recordings are reused)"

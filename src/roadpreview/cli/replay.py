@@ -8,7 +8,20 @@ from pathlib import Path
 from typing import Any
 
 from roadpreview.cli._input_args import add_input_arguments, inputs_from_args
+from roadpreview.cli._output import add_output_arguments, prepare_output_folder
 from roadpreview.cli._pipeline_args import add_pipeline_arguments, pipeline_config
+
+OUTPUTS = "alerts.blf, alerts.jsonl, frames.csv, plots.png, summary.json"
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected seconds, e.g. 12.5") from None
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be >= 0 s")
+    return value
 
 
 def add_subparser(sub: Any) -> None:
@@ -17,13 +30,33 @@ def add_subparser(sub: Any) -> None:
         help="replay a recording (video + CAN logs, or a simulator folder) through the pipeline",
         description=(
             "Replay a recording through the pipeline. Give a simulator recording folder, or a "
-            "video with --camera and CAN logs / an IMU CSV. Outputs: alerts.blf, alerts.jsonl, "
-            "frames.csv, plots.png, summary.json (and annotated.mp4 with --annotate)."
+            "video with --camera and CAN logs / an IMU CSV.\n\n"
+            f"Outputs in --out: {OUTPUTS} (and annotated.mp4 with --annotate). They are written "
+            "as the replay goes; after SIGINT/SIGTERM they hold every frame processed and "
+            'summary.json says "interrupted": true.\n\n'
+            "Times: frames.csv has t_unix_s (the log clock) and t_rel_s; the console and the "
+            "*_rel_s fields of summary.json count seconds from the video's frame 0, whose Unix "
+            "time is printed once."
         ),
     )
     add_input_arguments(p)
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    add_output_arguments(p, what=f"{OUTPUTS}")
     add_pipeline_arguments(p)
+    p.add_argument(
+        "--start",
+        type=_seconds,
+        default=None,
+        metavar="S",
+        help="begin at S seconds after the video's frame 0 (earlier frames are decoded and"
+        " skipped); default: the beginning",
+    )
+    p.add_argument(
+        "--end",
+        type=_seconds,
+        default=None,
+        metavar="S",
+        help="stop after S seconds from the video's frame 0; default: the end",
+    )
     p.add_argument(
         "--pace",
         type=float,
@@ -34,46 +67,57 @@ def add_subparser(sub: Any) -> None:
     p.add_argument(
         "--truth",
         action="store_true",
-        help="simulator folder: match the alerts to the true events and print them",
+        help="simulator folder: match the alerts to the true events, print them and add one"
+        " row per event to summary.json",
     )
     p.add_argument("--annotate", action="store_true", help="also write annotated.mp4")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
-    from roadpreview.apps.replay import (
-        format_modes,
-        print_progress,
-        replay,
-    )
+    from roadpreview.apps.progress import Progress
+    from roadpreview.apps.replay import OUTPUT_FILES, format_modes, replay
+    from roadpreview.errors import ConfigError
     from roadpreview.loop import Pace, install_signal_handlers
 
+    if args.start is not None and args.end is not None and not args.start < args.end:
+        raise ConfigError(f"--start {args.start} s must be before --end {args.end} s")
     inputs = inputs_from_args(args, truth=args.truth)
     config = pipeline_config(args)
+    out: Path = args.out
+    prepare_output_folder(out, force=args.force, ours=OUTPUT_FILES)
+    quiet = getattr(args, "verbosity", 0) < 0
+    progress = Progress("replay", enabled=not quiet)
     stop = threading.Event()
     handlers = install_signal_handlers(stop)  # Ctrl-C / SIGTERM: stop, flush, close outputs
     try:
         result = replay(
             inputs,
             config,
-            args.out,
+            out,
             annotated_video=args.annotate,
-            progress=print_progress,
+            progress=progress,
             stop=stop,
             pace=Pace(args.pace) if args.pace else None,
+            start_s=args.start,
+            end_s=args.end,
+            more_inputs=[p for p in (args.camera, args.config) if p is not None],
         )
     finally:
         handlers.restore()
+    t0 = result.video_start_s
     print(
-        f"\n{result.frames} frames in {result.seconds:.1f} s ({result.fps:.1f} fps), "
+        f"{result.frames} frames in {result.seconds:.1f} s ({result.fps:.1f} fps), "
         f"{len(result.alerts)} alert(s), {result.decode_failures} undecodable frame(s), "
         f"{result.input_errors} CAN input frame(s) skipped"
     )
+    print(f"times below: seconds from the video's frame 0 (Unix time {t0:.3f} s)")
     print("fusion modes:")
-    print(format_modes(result.mode_changes, result.video_start_s))
+    print(format_modes(result.mode_changes, t0))
     if result.match is not None:
         print(result.match.table())
-    print(f"outputs in {args.out}: alerts.blf, alerts.jsonl, frames.csv, plots.png, summary.json")
+    annotated = ", annotated.mp4" if args.annotate else ""
+    print(f"outputs in {out}: {OUTPUTS}{annotated}")
     if result.interrupted:
         print("interrupted: the outputs hold everything up to the last frame processed")
         return 130

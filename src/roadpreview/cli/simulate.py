@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import sys
+import time
 from pathlib import Path
 from typing import Any
+
+from roadpreview.cli._output import add_output_arguments, prepare_output_folder
 
 
 def _resolution(text: str) -> tuple[int, int]:
@@ -32,12 +34,39 @@ def add_subparser(sub: Any) -> None:
     src = p.add_mutually_exclusive_group()
     src.add_argument("--preset", choices=sorted(PRESETS), default="demo", help="named scenario")
     src.add_argument("--scenario", type=Path, help="a scenario.toml to run instead of a preset")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--seed", type=int, default=None, help="seed (default: the preset's 0)")
-    p.add_argument("--duration", type=float, default=None, help="override the duration, s")
-    p.add_argument("--resolution", type=_resolution, default=None, help="override, e.g. 640x360")
-    p.add_argument("--fps", type=float, default=None, help="override the frame rate")
-    p.add_argument("--can", default=None, help="CAN log formats, comma-separated: blf,asc,log")
+    add_output_arguments(
+        p,
+        what="a recording folder; with --dataset one folder per drive and dataset.json,"
+        " and a data set folder is resumed (complete drives reused)",
+    )
+    p.add_argument("--seed", type=int, default=None, help="seed; default: the preset's, 0")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="override the drive's duration, seconds; default: the preset's",
+    )
+    p.add_argument(
+        "--resolution",
+        type=_resolution,
+        default=None,
+        metavar="WxH",
+        help="override the image size in pixels, e.g. 640x360; default: the preset's",
+    )
+    p.add_argument(
+        "--fps",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="override the frame rate, frames per second; default: the preset's",
+    )
+    p.add_argument(
+        "--can",
+        default=None,
+        metavar="FORMATS",
+        help="CAN log formats, comma-separated: blf,asc,log; default: the preset's (blf)",
+    )
     p.add_argument("--masks", action="store_true", help="also write per-frame vehicle masks")
     p.add_argument(
         "--write-scenario",
@@ -55,9 +84,43 @@ def add_subparser(sub: Any) -> None:
     p.set_defaults(func=_run)
 
 
-def _progress(done: int, total: int) -> None:
-    if sys.stderr.isatty():
-        print(f"\r  {done}/{total}", end="" if done < total else "\n", file=sys.stderr)
+#: what a recording folder holds (`roadpreview.sim.recording`): replaced with --force
+RECORDING_FILES = (
+    "video.mp4",
+    "frames.csv",
+    "can.blf",
+    "can.asc",
+    "can.log",
+    "imu.csv",
+    "camera.toml",
+    "scenario.toml",
+    "truth.npz",
+    "truth.json",
+)
+
+
+def _is_dataset(folder: Path) -> bool:
+    """A folder an earlier ``--dataset`` run wrote (it is resumed, not refused)."""
+    return (folder / "dataset.json").is_file() or any(folder.glob("drive_[0-9]*"))
+
+
+class _Counter:
+    """``done/total`` progress of drives or frames, through `Progress` (bar or log lines)."""
+
+    def __init__(self, label: str, enabled: bool) -> None:
+        from roadpreview.apps.progress import Progress
+
+        self.progress = Progress(label, enabled=enabled)
+        self.t0 = time.perf_counter()
+        self.started = False
+
+    def __call__(self, done: int, total: int) -> None:
+        if not self.started:
+            self.progress.start(total)
+            self.started = True
+        self.progress(done, time.perf_counter() - self.t0)
+        if done >= total:
+            self.progress.close(done)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -68,6 +131,12 @@ def _run(args: argparse.Namespace) -> int:
     from roadpreview.sim.scenario import ScenarioConfig
 
     width, height = args.resolution if args.resolution else (None, None)
+    enabled = getattr(args, "verbosity", 0) >= 0
+    out: Path = args.out
+    if args.dataset is not None and out.is_dir() and _is_dataset(out):
+        print(f"resuming the data set in {out}: complete drives are reused")
+    else:
+        prepare_output_folder(out, force=args.force, ours=RECORDING_FILES)
     if args.dataset is not None:
         clips = build_dataset(
             args.out,
@@ -78,7 +147,7 @@ def _run(args: argparse.Namespace) -> int:
             duration_s=args.duration,
             width=width,
             height=height,
-            progress=_progress,
+            progress=_Counter("drives", enabled),
         )
         n_pos = sum(c.label for c in clips)
         n_hard = sum(1 for c in clips if c.label and c.hard)
@@ -110,7 +179,7 @@ def _run(args: argparse.Namespace) -> int:
         cfg.save(args.out / "scenario.toml")
         print(f"wrote {args.out / 'scenario.toml'}")
         return 0
-    info = write_recording(cfg, args.out, progress=_progress)
+    info = write_recording(cfg, args.out, progress=_Counter("frames", enabled))
     print(
         f"{cfg.name} (seed {cfg.seed}): {info.n_frames} frames, {info.n_imu_samples} IMU samples, "
         f"{info.n_can_frames} CAN frames in {info.seconds:.1f} s -> {info.folder}"

@@ -14,6 +14,7 @@ Vision is a small state machine, fed once per frame:
 At the start vision is trusted on its first good frame (there is nothing to
 re-validate against). The mode follows from vision trust and IMU liveness:
 FUSED, VISUAL_ONLY (IMU lost), IMU_ONLY (vision not trusted), DEGRADED.
+`mode_reason` says why a frame is in its mode, in words that fit that mode.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import math
 from dataclasses import dataclass
 from enum import Enum
 
-from roadpreview.fusion.config import ModeConfig
+from roadpreview.fusion.config import GyroConfig, ModeConfig
 from roadpreview.types import FusionMode
 
 
@@ -144,3 +145,44 @@ class ModeSupervisor:
         else:
             self.mode = _DEGRADED
         return self.mode
+
+
+def gyro_state(gyro_age_s: float, timeout_s: float = GyroConfig().timeout_s) -> str:
+    """The gyro as the mode reasons see it: ``"none"`` (no sample yet), ``"timed out"``
+    (newest sample older than ``timeout_s``) or ``"recent"``."""
+    if math.isinf(gyro_age_s):
+        return "none"
+    return "timed out" if gyro_age_s > timeout_s else "recent"
+
+
+def mode_reason(
+    mode: FusionMode,
+    *,
+    vision_failure: str = "",
+    gyro_age_s: float = math.inf,
+    gyro_timeout_s: float = GyroConfig().timeout_s,
+) -> str:
+    """Why a frame is in ``mode``, from what the frame shows: ``vision_failure``, why the
+    frame's pitch vision failed ('' when it worked); ``gyro_age_s``, the frame time minus
+    the newest gyro sample's (inf: none yet). The reason always describes ``mode`` (the
+    frame's lead may be lost in any mode: that is not why the mode is what it is)."""
+    gyro = gyro_state(gyro_age_s, gyro_timeout_s)
+    if gyro == "none":
+        imu = "no IMU input (no gyro sample so far)"
+    elif gyro == "timed out":
+        imu = f"gyro timed out (newest sample {gyro_age_s:.2f} s old)"
+    else:
+        imu = "gyro not fused (its time offset is still being estimated, or the back end has none)"
+    if vision_failure:
+        vision = f"vision failed: {vision_failure}"
+    else:
+        vision = "vision not trusted (it disagreed with the gyro, or is re-validating)"
+    if mode is _FUSED:
+        if gyro == "none":
+            return "vision trusted; no gyro sample yet (start-up grace)"
+        return "gyro and vision agree"
+    if mode is _VISUAL_ONLY:
+        return f"vision only: {imu}"
+    if mode is _IMU_ONLY:
+        return f"gyro only: {vision}"
+    return f"no pitch source: {imu}; {vision}"

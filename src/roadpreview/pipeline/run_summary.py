@@ -51,7 +51,9 @@ class RunSummary:
     injected_frames: int = 0  #: image-less frames the watchdogs pushed
     alerts: list[Alert] = field(default_factory=list)
     confirmations: list[ConfirmationResult] = field(default_factory=list)
-    #: (time, mode, reason) at the first frame and at every change
+    #: (time, mode, reason) at the first frame and at every change of the mode or of the
+    #: gyro's state (none yet, recent, timed out: `fusion.mode_machine.gyro_state`), so
+    #: that the reason (`fusion.mode_machine.mode_reason`) holds until the next entry
     mode_changes: list[tuple[float, FusionMode, str]] = field(default_factory=list)
     first_t: float = math.nan  #: time of the first frame
     last_t: float = math.nan  #: time of the last frame

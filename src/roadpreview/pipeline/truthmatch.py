@@ -29,6 +29,12 @@ class MatchRow:
     expected: bool  #: the lead hits it within range: it should be detected
     alert: Alert | None
     lead_time_s: float  #: ego arrival minus alert emission (NaN: no alert or no arrival)
+    #: the alert's crossing time minus the lead's true crossing, s (NaN: no alert)
+    crossing_error_s: float = math.nan
+    #: the ego's true arrival minus the alert's crossing time, s (NaN: no alert or arrival)
+    tta_true_s: float = math.nan
+    #: the alert's predicted time to arrival minus ``tta_true_s``, s (NaN: either unknown)
+    tta_error_s: float = math.nan
 
     @property
     def outcome(self) -> str:
@@ -112,13 +118,17 @@ def match_alerts(
             if best is None or abs(a.t_s - t_abs) < abs(alerts[best].t_s - t_abs):
                 best = i
         alert = None
-        lead_time = math.nan
+        lead_time = crossing_error = tta_true = tta_error = math.nan
         if best is not None:
             used.add(best)
             alert = alerts[best]
+            crossing_error = alert.t_s - t_abs
             t_ego = e.get("ego_front_t_s")
             if t_ego is not None:
                 lead_time = t0 + float(t_ego) - alert.t_emit_s
+                tta_true = t0 + float(t_ego) - alert.t_s
+                if alert.time_to_arrival_s is not None:
+                    tta_error = alert.time_to_arrival_s - tta_true
         rows.append(
             MatchRow(
                 event_index=int(e["index"]),
@@ -130,6 +140,9 @@ def match_alerts(
                 expected=expected,
                 alert=alert,
                 lead_time_s=lead_time,
+                crossing_error_s=crossing_error,
+                tta_true_s=tta_true,
+                tta_error_s=tta_error,
             )
         )
     false_alarms = [a for i, a in enumerate(alerts) if i not in used]

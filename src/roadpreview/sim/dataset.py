@@ -267,4 +267,3 @@ def _same_scenario(folder: Path, cfg: ScenarioConfig) -> bool:
         return ScenarioConfig.load(folder / "scenario.toml") == cfg
     except Exception:  # a half-written or foreign folder is regenerated
         return False
-

@@ -148,6 +148,15 @@ class CanLogSink(CanSink):
         self.writer.write(msg)
         return True
 
+    def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
+        super().on_frame(frame, result, status)
+        if result.alerts or result.confirmations:  # on disk as they happen (an interrupt)
+            self.writer.flush()
+
+    def on_flush(self, t_s: float, alerts: Sequence[Alert], status: Status) -> None:
+        super().on_flush(t_s, alerts, status)
+        self.writer.flush()
+
     def close(self, summary: RunSummary) -> None:
         try:
             super().close(summary)

@@ -30,25 +30,84 @@ def alert_json(alert: Alert) -> dict[str, Any]:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
 
 
-class FrameTableWriter:
-    """The per-frame table as CSV, written as frames come (bounded memory)."""
+#: `FrameResult.COLUMNS` -> the frame table's column: every name says its unit (``_px``,
+#: ``_rad``, ``_m``, ``_s``, ...); counts, flags, codes and classes have none
+FRAME_TABLE_NAMES: dict[str, str] = {
+    "t": "t_unix_s",
+    "index": "frame_index",
+    "y": "y_px",
+    "y_left": "y_left_px",
+    "y_right": "y_right_px",
+    "y_c": "y_c_px",
+    "phi": "phi_rad",
+    "phi_std": "phi_std_rad",
+    "mode": "mode",
+    "bias": "gyro_bias_rad_s",
+    "time_offset": "imu_time_offset_s",
+    "s": "s_px",
+    "s_left": "s_left_px",
+    "s_right": "s_right_px",
+    "threshold_px": "threshold_px",
+    "suppressed": "suppressed_code",
+    "lead_found": "lead_found",
+    "lead_distance_m": "lead_distance_m",
+    "n_lead_points": "n_lead_points",
+    "n_background": "n_background_points",
+    "textured": "textured",
+    "n_events": "n_events",
+    "heave_m": "heave_m",
+    "heave_px": "heave_px",
+    "score": "score",
+    "score_threshold": "score_threshold",
+    "score_t": "score_t_unix_s",
+    "road_input_mm": "road_input_mm",
+    "background_mm": "background_mm",
+    "ego_accel_peak_mps2": "ego_accel_peak_mps2",
+    "road_class": "road_class",
+}
 
-    def __init__(self, path: Path) -> None:
+
+def frame_table_columns() -> tuple[str, ...]:
+    """The header of ``frames.csv``: `FrameResult.COLUMNS` with their units, ``t_rel_s``
+    (seconds since the first frame) after ``t_unix_s``, and the ego's and lead's speed
+    terms at the end."""
+    names = [FRAME_TABLE_NAMES.get(c, c) for c in FrameResult.COLUMNS]
+    names.insert(1, "t_rel_s")
+    return (*names, "ego_speed_mps", "lead_accel_mps2")
+
+
+class FrameTableWriter:
+    """The per-frame table as CSV (`frame_table_columns`), written as frames come (bounded
+    memory). ``t_unix_s`` is the pipeline's clock (Unix time when the inputs carry it, as
+    recordings and CAN logs do); ``t_rel_s`` is measured from ``t0`` (default: the first
+    frame written)."""
+
+    def __init__(self, path: Path, *, t0: float | None = None) -> None:
         self._fh: TextIO = path.open("w", newline="")
         self._w = csv.writer(self._fh)
-        self._w.writerow(FrameResult.COLUMNS)
+        self.columns = frame_table_columns()
+        self._w.writerow(self.columns)
+        self.t0 = t0
 
     #: columns that are times: they keep microseconds whatever their epoch
-    TIME_COLUMNS = frozenset({"t", "score_t"})
+    TIME_COLUMNS = frozenset({"t_unix_s", "t_rel_s", "score_t_unix_s"})
 
     def write(self, r: FrameResult) -> None:
+        if self.t0 is None:
+            self.t0 = r.t
+        values = r.row()
+        values.insert(1, r.t - self.t0)
+        values += [
+            math.nan if r.ego_speed_mps is None else r.ego_speed_mps,
+            math.nan if r.lead_accel_mps2 is None else r.lead_accel_mps2,
+        ]
         # times with microseconds, the rest with 6 significant digits
         self._w.writerow(
             [
                 (f"{v:.6f}" if name in self.TIME_COLUMNS else f"{v:.6g}")
                 if isinstance(v, float)
                 else v
-                for name, v in zip(FrameResult.COLUMNS, r.row(), strict=True)
+                for name, v in zip(self.columns, values, strict=True)
             ]
         )
 
@@ -138,7 +197,8 @@ def plot_run(
     ax[3].set_yticks([])
     ax[3].set_ylabel("mode")
     ax[3].legend(loc="upper right", ncol=4, fontsize=7)
-    ax[3].set_xlabel("time (s)")
+    clock = f"; frame 0 at Unix {t0:.3f} s" if t0 > 1e8 else ""
+    ax[3].set_xlabel(f"time since frame 0 (s){clock}")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -209,11 +269,12 @@ def alert_record(alert: Alert, c: ConfirmationResult | None) -> dict[str, Any]:
 
 # -- the sinks ------------------------------------------------------------------------------
 class FrameTableSink(Sink):
-    """``frames.csv``: one row per frame (`FrameResult.COLUMNS`), flushed every
-    ``flush_every`` frames so that an interrupt keeps what was processed."""
+    """``frames.csv``: one row per frame (`frame_table_columns`; ``t_rel_s`` from ``t0``,
+    default the first frame), flushed every ``flush_every`` frames so that an interrupt
+    keeps what was processed."""
 
-    def __init__(self, path: str | Path, *, flush_every: int = 30) -> None:
-        self.writer = FrameTableWriter(Path(path))
+    def __init__(self, path: str | Path, *, flush_every: int = 30, t0: float | None = None) -> None:
+        self.writer = FrameTableWriter(Path(path), t0=t0)
         self.flush_every = flush_every
         self._n = 0
 
@@ -284,9 +345,7 @@ class PlotSink(Sink):
 
     def close(self, summary: RunSummary) -> None:
         if self.series.cols["t"]:
-            plot_run(
-                self.series, self.alerts, self.path, t0=self.t0, truth_times=self.truth_times
-            )
+            plot_run(self.series, self.alerts, self.path, t0=self.t0, truth_times=self.truth_times)
 
 
 class AnnotatedVideoSink(Sink):
