@@ -23,8 +23,8 @@ def short_demo(make_recording):  # type: ignore[no-untyped-def]
     return make_recording("demo", seed=0, duration_s=8.0, width=1280, height=720)
 
 
-#: the frame table's columns that are times (on the run's clock)
-TIME_COLUMNS = ("t", "score_t")
+#: the frame table's columns that are times on the run's clock (Unix time)
+TIME_COLUMNS = ("t_unix_s", "score_t_unix_s")
 
 
 def _rows(path: Path) -> list[dict[str, str]]:
@@ -67,17 +67,24 @@ def test_run_with_can_log_gives_the_replays_frames_and_alerts(
     assert len(daemon_rows) == len(replay_rows) == n_frames
     # the daemon's clock is the wall clock (frame 0 about a second after the start), the
     # replay's the recording's: the time columns differ by one constant, nothing else does
-    shift = float(daemon_rows[0]["t"]) - float(replay_rows[0]["t"])
+    shift = float(daemon_rows[0]["t_unix_s"]) - float(replay_rows[0]["t_unix_s"])
     for k, (d, r) in enumerate(zip(daemon_rows, replay_rows, strict=True)):
         for name in d:
             if name in TIME_COLUMNS and d[name] not in ("", "nan"):
                 assert float(d[name]) - float(r[name]) == pytest.approx(shift, abs=2e-6)
+            elif name == "t_rel_s":  # both from frame 0
+                assert float(d[name]) == pytest.approx(float(r[name]), abs=2e-6)
             else:
                 assert d[name] == r[name], f"frame {k}: {name} differs"
     assert daemon_rows[-1]["mode"] == "FUSED"
     assert ref.alerts, "the drive has alerts to compare"
     sent = [OutputDecoder().decode(m) for m in read_can_log(tmp_path / "alerts.blf")]
-    alerts = [m for m in sent if isinstance(m, ReceivedAlert)]
+    # each alert is repeated until the ego has passed it: its first send, in order
+    first_sends: dict[int, ReceivedAlert] = {}
+    for m in sent:
+        if isinstance(m, ReceivedAlert):
+            first_sends.setdefault(m.alert_id, m)
+    alerts = list(first_sends.values())
     assert [(a.alert_id, a.side, a.mode) for a in alerts] == [
         (a.alert_id % 256, a.side, a.mode) for a in ref.alerts
     ]
