@@ -249,11 +249,13 @@ def test_the_log_and_alerts_jsonl_are_on_disk_as_the_alerts_happen(
             sink.on_frame(CameraFrame(t, None), result, _status(k))
         if k % 10 == 0:
             can_sink.on_status(t, _status(k))
-        if alerts:
-            ids = [m.data[2] for m in read_can_log(log_path) if m.arbitration_id == 0x200]
+        if alerts:  # each alert is repeated until passed: its id, once, in order
+            sent = [m.data[2] for m in read_can_log(log_path) if m.arbitration_id == 0x200]
+            ids = list(dict.fromkeys(sent))
             lines = jsonl_path.read_text().splitlines()
             alerts_on_disk.append((ids, [json.loads(x)["alert_id"] for x in lines]))
     assert alerts_on_disk == [([1], [1]), ([1, 2], [1, 2]), ([1, 2, 3], [1, 2, 3])]
     can_sink.close(RunSummary())
     jsonl_sink.close(RunSummary())
-    assert len([m for m in read_can_log(log_path) if m.arbitration_id == 0x200]) == 3
+    ended = {m.data[2] for m in read_can_log(log_path) if m.arbitration_id == 0x205}
+    assert ended == {1, 2, 3}  # every alert closed by an RP_ALERT_END (cancelled at close)

@@ -118,5 +118,5 @@ def test_another_cars_log_is_named_then_replayed_with_the_flags(
     assert last["mode"] == "FUSED"
     lag = float(drive.info["imu_time_offset_s"])
     first = min(m.timestamp for m in read_can_log(log)) - float(drive.info["can_t0_unix_s"])
-    assert float(last["time_offset"]) == pytest.approx(lag - first, abs=0.003)
+    assert float(last["imu_time_offset_s"]) == pytest.approx(lag - first, abs=0.003)
     assert caplog.text.count("frames matched") == 1  # only the run without the flags

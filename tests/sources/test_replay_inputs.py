@@ -137,7 +137,7 @@ def test_imu_offset_flag_overrides_the_coarse_rule(drive: Any, tmp_path: Path) -
     last = dict(zip(header, rows[-1].split(","), strict=True))
     # the CSV is now on the video's clock exactly: only the IMU's own lag is left
     assert last["mode"] == "FUSED"
-    assert float(last["time_offset"]) == pytest.approx(_imu_offset(drive), abs=OFFSET_TOL_S)
+    assert float(last["imu_time_offset_s"]) == pytest.approx(_imu_offset(drive), abs=OFFSET_TOL_S)
 
 
 # --- a video and a CAN log, in every format -----------------------------------------------------

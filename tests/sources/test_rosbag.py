@@ -243,10 +243,10 @@ def test_rosbag2_folder_with_raw_images_replays_from_the_command_line(
         rows = list(csv.DictReader(fh))
     assert len(rows) == drive.info["n_frames"]
     t0 = float(drive.info["can_t0_unix_s"])
-    assert float(rows[0]["t"]) == pytest.approx(t0, abs=1e-6)  # the header stamp, not log time
+    assert float(rows[0]["t_unix_s"]) == pytest.approx(t0, abs=1e-6)  # header stamp
     assert rows[-1]["mode"] == "FUSED"
     # images and IMU stamped by their headers: only the IMU's own lag is left
-    assert float(rows[-1]["time_offset"]) == pytest.approx(
+    assert float(rows[-1]["imu_time_offset_s"]) == pytest.approx(
         float(drive.info["imu_time_offset_s"]), abs=OFFSET_TOL_S
     )
 
