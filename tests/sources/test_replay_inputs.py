@@ -4,6 +4,7 @@ reads, mixed clocks refused before processing."""
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import shutil
@@ -81,6 +82,10 @@ def test_video_alone_is_vision_only_with_unix_time_stamps(
     # no IMU: never FUSED nor IMU_ONLY
     assert {m for _, m, _ in result.mode_changes} <= {FusionMode.VISUAL_ONLY, FusionMode.DEGRADED}
     assert _final(result).mode is FusionMode.VISUAL_ONLY
+    assert "no IMU input" in result.mode_changes[-1][2]  # the mode said plainly
+    # the summary says which clock rule was used
+    rules = json.loads((tmp_path / "out" / "summary.json").read_text())["clock"]["rules"]
+    assert any("modification time minus its duration" in r for r in rules)
 
 
 # --- a video and a phone IMU CSV on its own clock ---------------------------------------------

@@ -88,6 +88,8 @@ class ReplayInputs:
     speed_topic: str | None = None  #: the bag's speed topic; None: the only twist/odometry
     can_offset_s: float | None = None
     imu_offset_s: float | None = None
+    #: how `sources` put each input on the drive's clock (filled by `sources`)
+    clock_notes: list[str] = field(default_factory=list, compare=False)
 
     @classmethod
     def from_recording(cls, folder: str | Path) -> ReplayInputs:
@@ -182,6 +184,7 @@ class ReplayInputs:
         one on the drive's clock (class docstring); the clock rules used are logged."""
         camera, sources, plan = self._clock_plan(config)
         camera.check_size(self.camera.size)
+        self.clock_notes = [*plan.notes, *plan.warnings]  # for summary.json
         for note in plan.notes:
             log.info("clock: %s", note)
         for warning in plan.warnings:
@@ -190,6 +193,7 @@ class ReplayInputs:
             isinstance(s, BagSampleSource) and s.msgtype in IMU_TYPES for s in sources
         ):
             log.warning("%s: no IMU input: vision-only fusion (VISUAL_ONLY)", self.video)
+            self.clock_notes.append("no IMU input: vision-only fusion (VISUAL_ONLY)")
         return camera, sources
 
 
@@ -203,6 +207,7 @@ class ReplayResult:
     match: MatchReport | None = None
     results: list[FrameResult] | None = None
     video_name: str = ""  #: the video source's name (its errors are decode failures)
+    clock_notes: list[str] = field(default_factory=list)  #: how the inputs were put on one clock
 
     @property
     def frames(self) -> int:
@@ -357,6 +362,7 @@ def replay(
         match=match,
         results=collected.results if collected is not None else None,
         video_name=video.name,
+        clock_notes=list(inputs.clock_notes),
     )
     if out_dir is not None:
         files = [*input_files(inputs, sources), *more_inputs]

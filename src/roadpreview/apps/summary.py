@@ -144,6 +144,7 @@ def summary_dict(
             "first_frame_rel_s": _num(s.first_t - start),
             "last_frame_rel_s": _num(s.last_t - start),
             "note": "*_rel_s: seconds from the video's frame 0 (frame0_unix_s)",
+            "rules": result.clock_notes,  # how each input was put on this clock
         },
         "frames": s.frames,
         "seconds": round(s.seconds, 3),
