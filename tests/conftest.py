@@ -68,8 +68,16 @@ def make_recording(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Re
         video: bool = True,
         **scenario_overrides: object,
     ) -> Recording:
-        key = (preset, seed, duration_s, width, height, masks, video,
-               tuple(sorted(scenario_overrides.items())))
+        key = (
+            preset,
+            seed,
+            duration_s,
+            width,
+            height,
+            masks,
+            video,
+            tuple(sorted(scenario_overrides.items())),
+        )
         if key not in cache:
             cfg = drive_config(preset, seed, duration_s=duration_s, width=width, height=height)
             # the overrides are DriveConfig fields of any type: checked by replace at run time
@@ -81,3 +89,26 @@ def make_recording(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Re
         return cache[key]
 
     return make
+
+
+@pytest.fixture(scope="session")
+def first_frames() -> Callable[[Path, Path, int], Path]:
+    """``first_frames(video, out, n)``: a video of the first ``n`` frames of ``video``
+    (MJPG in ``out``, an .avi), e.g. a camera that goes silent after them."""
+    import cv2
+
+    def write(video: Path, out: Path, n: int) -> Path:
+        src = cv2.VideoCapture(str(video))
+        size = (int(src.get(cv2.CAP_PROP_FRAME_WIDTH)), int(src.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+        writer = cv2.VideoWriter(str(out), cv2.VideoWriter.fourcc(*"MJPG"), 30.0, size)
+        try:
+            for _ in range(n):
+                ok, frame = src.read()
+                assert ok, f"{video}: fewer than {n} frames"
+                writer.write(frame)
+        finally:
+            writer.release()
+            src.release()
+        return out
+
+    return write

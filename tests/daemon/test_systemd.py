@@ -11,7 +11,6 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-import cv2
 import pytest
 
 from roadpreview.apps.daemon import Daemon, DaemonOptions, DaemonSummary
@@ -149,18 +148,11 @@ def test_a_lost_camera_stops_the_pings_only_when_configured(
     run_in_thread: RunInThread,
     wait_for: Callable[..., bool],
     tmp_path: Path,
+    first_frames: Callable[[Path, Path, int], Path],
 ) -> None:
     # a camera that delivers 10 frames and then goes silent; the loop goes on with the
     # camera watchdog's image-less frames (DEGRADED status on the bus)
-    short = tmp_path / "short.avi"
-    src = cv2.VideoCapture(str(small_drive.video))
-    writer = cv2.VideoWriter(str(short), cv2.VideoWriter.fourcc(*"MJPG"), 30.0, (320, 180))
-    for _ in range(10):
-        ok, frame = src.read()
-        assert ok
-        writer.write(frame)
-    writer.release()
-    src.release()
+    short = first_frames(small_drive.video, tmp_path / "short.avi", 10)
     cfg = virtual_config(
         watchdog_ping_s=0.05, camera_timeout_s=0.3, watchdog_camera_lost_s=camera_lost_s
     )

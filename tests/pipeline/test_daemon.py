@@ -12,7 +12,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import can
-import cv2
 import pytest
 
 from roadpreview.apps.daemon import Daemon, DaemonOptions, DaemonSummary
@@ -201,17 +200,9 @@ def test_stop_event_shuts_down_cleanly_and_closes_the_log(short_demo, tmp_path: 
     assert statuses, "no RP_STATUS on the output bus"
 
 
-def test_camera_watchdog_reports_vision_failure(short_demo, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_camera_watchdog_reports_vision_failure(short_demo, tmp_path: Path, first_frames) -> None:  # type: ignore[no-untyped-def]
     # a camera that delivers 10 frames and then goes silent (no IMU on the bus either)
-    short = tmp_path / "short.avi"
-    src = cv2.VideoCapture(str(short_demo.video))
-    writer = cv2.VideoWriter(str(short), cv2.VideoWriter.fourcc(*"MJPG"), 30.0, (1280, 720))
-    for _ in range(10):
-        ok, frame = src.read()
-        assert ok
-        writer.write(frame)
-    writer.release()
-    src.release()
+    short = first_frames(short_demo.video, tmp_path / "short.avi", 10)
     channel = f"roadpreview-daemon-{uuid.uuid4().hex}"
     collector = _Collector(channel)
     cfg = _config(channel)
