@@ -12,6 +12,7 @@ import pytest
 from roadpreview.fusion import VisualPitch, make_fusion
 from roadpreview.fusion.config import ModeConfig
 from roadpreview.fusion.mode_machine import ModeSupervisor, VisionTrust
+from roadpreview.fusion.streaming import StreamingPitchFusion
 from roadpreview.types import FusionMode
 
 if TYPE_CHECKING:  # conftest is not importable at run time (--import-mode=importlib)
@@ -226,3 +227,25 @@ def test_a_failed_fit_from_the_estimator_is_a_vision_failure() -> None:
 
     m = VisualPitch.from_estimate(0.0, 0.1, PitchEstimate.failed("too few points"))
     assert not m.quality_ok
+
+
+@pytest.mark.parametrize("offset_s", [0.057, 0.12])
+def test_imu_outage_with_an_offset_above_a_frame_recovers_within_1s(
+    kit: FusionTestKit, offset_s: float
+) -> None:
+    """No gyro from 6 to 9 s on a drive whose IMU stamps lag the camera by more than a
+    frame (57 ms, and near the search range's end), merged by stamp as the run loop does
+    (no latency). The returning samples are not "late" (the blind frames spent no gyro):
+    FUSED again within 1 s of the first sample after the outage, and to the end."""
+    d = kit.synthetic(14.0, seed=2, offset_s=offset_s, imu_gaps=((6.0, 9.0),))
+    fusion = make_fusion("kalman")
+    r = kit.replay(fusion, d, kit.front_end(d), latency_s=0.0)
+    first_good = d.imu_t[d.imu_t > 9.0][0] - offset_s  # on the camera's clock
+    after = r.t >= first_good
+    fused = r.t[after & (r.mode == FUSED)]
+    assert fused.size > 0
+    assert fused[0] - first_good < 1.0
+    assert np.all(r.mode[r.t >= first_good + 1.0] == FUSED)
+    assert isinstance(fusion, StreamingPitchFusion)
+    assert fusion.stats.get("late", 0) == 0  # no sample of the drive rejected as late
+    assert np.all(r.mode[(r.t > 6.0 + 0.25) & (r.t < 9.0)] == VISUAL_ONLY)

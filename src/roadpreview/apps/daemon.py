@@ -58,6 +58,7 @@ from roadpreview.sinks import Sink
 from roadpreview.sinks.can import CanBusSink, repetition_config
 from roadpreview.sinks.files import FrameTableSink
 from roadpreview.sources.can import CanBusSource, make_decoder
+from roadpreview.sources.clockguard import ClockGuard
 from roadpreview.sources.video import (
     CameraDeviceSource,
     ImageSequenceSource,
@@ -346,8 +347,14 @@ class Daemon:
                 supervisor.start()
             if self.player is not None:
                 self.player.start()
+            # the bus's stamps against the loop's clock as frames arrive: stray stamps
+            # dropped alone, clock steps taken off (`ClockGuard`)
+            pace = self.pace
+            clock = (
+                time.time if pace is None else (lambda: pace.now() if pace.started else math.nan)
+            )
             result = run(
-                [self.camera, self.can_in],
+                [self.camera, ClockGuard(self.can_in, clock=clock)],
                 self.pipeline,
                 sinks,
                 pace=self.pace,

@@ -39,6 +39,7 @@ from roadpreview.sinks.files import (
 )
 from roadpreview.sources import Source
 from roadpreview.sources.can import CanLogSource, first_timestamp, make_decoder
+from roadpreview.sources.clockguard import ClockGuard
 from roadpreview.sources.clocks import (
     CameraClock,
     ClockPlan,
@@ -194,7 +195,10 @@ class ReplayInputs:
         ):
             log.warning("%s: no IMU input: vision-only fusion (VISUAL_ONLY)", self.video)
             self.clock_notes.append("no IMU input: vision-only fusion (VISUAL_ONLY)")
-        return camera, sources
+        # every other input's clock checked against its own stamps: lone stray stamps
+        # dropped, clock steps taken off (the camera is the time base; the loop skips a
+        # frame stamped before its predecessor)
+        return camera, [s if s is camera else ClockGuard(s) for s in sources]
 
 
 @dataclass

@@ -386,8 +386,15 @@ class StreamingPitchFusion:
             if startup is not None and self._t - self._t0 > self._history - 1.0:
                 self._startup = None  # too long ago: the gyro history no longer covers it
         t_gyro = self._t + tau
+        # gyro up to here is spent: later samples for it are late. Never beyond the newest
+        # sample received: frames committed without gyro (IMU lost, or before the offset was
+        # known) spent no gyro, and a sample newer than every other one is the IMU coming
+        # back, whatever the offset (else, with an offset above a frame, every returning
+        # sample was "late" and the IMU never recovered)
+        if newest is not None and newest < t_gyro:
+            t_gyro = newest
         floor = gyro.floor
-        if ready and t_gyro > floor:  # gyro up to here is spent: later samples for it are late
+        if ready and t_gyro > floor:
             gyro.floor = floor = t_gyro
         gyro.trim((floor if floor > t_gyro else t_gyro) - self._history)
 

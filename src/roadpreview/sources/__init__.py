@@ -11,6 +11,8 @@ it in a thread of its own. A file source is read lazily, in the loop's thread.
 * `can`: a CAN log (any format python-can reads) or a live bus, decoded *in the
   source* through the DBC and the input mapping into `ImuSample` / `SpeedSample`;
 * `imu_csv`: a phone-style IMU CSV;
+* `clockguard`: `ClockGuard`, one source's clock checked sample by sample (stray stamps
+  dropped alone, clock steps detected, logged once and taken off);
 * `recording`: the recording folder format (video, frames.csv, CAN log, camera,
   truth) that the simulator writes and replay reads.
 """

@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import can
@@ -27,6 +27,9 @@ from roadpreview.sources import shifted
 from roadpreview.types import InputSample
 
 log = logging.getLogger(__name__)
+
+#: a frame-level clock check: frames in, frames out (`roadpreview.sources.clockguard`)
+StampFilter = Callable[[Iterable[can.Message]], Iterator[can.Message]]
 
 
 def make_decoder(dbc: str = "", mapping: str = "roadpreview") -> CanInputDecoder:
@@ -49,6 +52,9 @@ class CanLogSource:
     """The samples of one CAN log, decoded (module docstring)."""
 
     live = False
+    #: the frames' clock check before decoding (a `ClockGuard` installs one); None: a frame
+    #: stamped before its predecessor is dropped
+    stamp_filter: StampFilter | None = None
 
     def __init__(
         self, path: str | Path, decoder: CanInputDecoder, *, offset_s: float = 0.0
@@ -74,11 +80,12 @@ class CanLogSource:
         self._reader = CanLogReader(self.path)
         last = -math.inf
         self.frames = self.samples = 0
-        for msg in self._reader:
+        check = self.stamp_filter
+        for msg in self._reader if check is None else check(self._reader):
             if self._closed:
                 return
             self.frames += 1
-            if msg.timestamp < last:
+            if check is None and msg.timestamp < last:
                 self.out_of_order += 1
                 log.warning(
                     "%s: time stamp goes back %.3f s at %.6f; frame dropped",
@@ -110,6 +117,8 @@ class CanBusSource:
     queues them, bounded; drops are counted). Live. The bus stays its owner's."""
 
     live = True
+    #: the frames' clock check before decoding (a `ClockGuard` installs one)
+    stamp_filter: StampFilter | None = None
 
     def __init__(
         self,
@@ -144,15 +153,20 @@ class CanBusSource:
 
     def __iter__(self) -> Iterator[InputSample]:
         self.receiver = CanReceiver(self.bus, maxsize=self.queue_size)
+        check = self.stamp_filter
         try:
-            while not self._stop.is_set():
-                msg = self.receiver.recv(timeout=self.poll_s)
-                if msg is None:
-                    continue
-                self.frames += 1
+            frames = self._received(self.receiver)
+            for msg in frames if check is None else check(frames):
                 yield from self.decoder.decode(msg)
         finally:
             self.receiver.stop()
+
+    def _received(self, receiver: CanReceiver) -> Iterator[can.Message]:
+        while not self._stop.is_set():
+            msg = receiver.recv(timeout=self.poll_s)
+            if msg is not None:
+                self.frames += 1
+                yield msg
 
     def close(self) -> None:
         self._stop.set()
