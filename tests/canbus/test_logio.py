@@ -12,6 +12,7 @@ from pathlib import Path
 import can
 import numpy as np
 import pytest
+from can.io.blf import BLFWriter
 
 from roadpreview.canbus.logio import CanLogReader, read_can_log, write_can_log
 from roadpreview.errors import ConfigError, InputDataError
@@ -202,6 +203,79 @@ def test_truncated_gzip_log_keeps_the_frames_before_the_cut(tmp_path: Path) -> N
     _assert_same(got, frames[: len(got)], 1e-6)
     assert reader.problems
     assert reader.problems[-1].fatal
+
+
+#: frames held (at least in part) by one BLF container as python-can writes them: 128 KiB
+#: of 48-byte CAN_MESSAGE2 objects (16 base header + 16 v1 header + 16 message), the first
+#: and last straddling into the neighbouring containers
+FRAMES_PER_CONTAINER = -(-BLFWriter.max_container_size // 48) + 1
+
+
+def _lost(got: list[can.Message], frames: list[can.Message]) -> list[int]:
+    """Indices of ``frames`` missing from ``got``; ``got`` must hold nothing else."""
+    key = {(m.timestamp, m.arbitration_id, bytes(m.data)) for m in got}
+    kept = [
+        k for k, m in enumerate(frames) if (m.timestamp, m.arbitration_id, bytes(m.data)) in key
+    ]
+    assert len(kept) == len(got)  # nothing invented
+    return sorted(set(range(len(frames))) - set(kept))
+
+
+@pytest.mark.parametrize("mode", ["insert", "overwrite"])
+def test_blf_resyncs_after_512_random_bytes(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, mode: str
+) -> None:
+    frames = _frames(9000)  # a little over 3 containers
+    clean = tmp_path / "clean.blf"
+    write_can_log(clean, frames)
+    data = clean.read_bytes()
+    middle = len(data) // 2
+    junk = np.random.default_rng(7).integers(0, 256, 512, dtype=np.uint8).tobytes()
+    path = tmp_path / "damaged.blf"
+    path.write_bytes(data[:middle] + junk + data[middle + (512 if mode == "overwrite" else 0) :])
+    with caplog.at_level(logging.WARNING, logger="roadpreview.canbus.logio"):
+        reader = CanLogReader(path)
+        got = list(reader)
+    lost = _lost(got, frames)
+    # what is lost: the frames of the damaged container only, one run in the middle
+    assert 0 < len(lost) <= FRAMES_PER_CONTAINER
+    assert lost == list(range(lost[0], lost[-1] + 1))
+    assert lost[0] > 0.3 * len(frames)
+    assert lost[-1] < 0.7 * len(frames)
+    assert [m.timestamp for m in got] == [
+        m.timestamp for k, m in enumerate(frames) if k not in lost
+    ]
+    assert reader.counts == {"resynced": 1}  # and no 'never finalised' for inserted bytes
+    [problem] = reader.problems
+    assert not problem.fatal
+    assert problem.byte_offset is not None
+    assert problem.byte_offset <= middle
+    assert problem.resumed_at is not None
+    assert problem.resumed_at > middle + 512
+    assert reader.bytes_skipped == problem.resumed_at - problem.byte_offset
+    assert f"{path} (byte {problem.byte_offset})" in caplog.text
+    assert f"reading resumed at byte {problem.resumed_at}" in caplog.text
+    with pytest.raises(InputDataError, match=r"damaged\.blf.*resumed"):
+        list(read_can_log(path, errors="raise"))
+
+
+def test_blf_with_damage_in_many_places_delivers_only_true_frames(tmp_path: Path) -> None:
+    frames = _frames(15000)
+    path = tmp_path / "rotten.blf"
+    write_can_log(path, frames)
+    data = bytearray(path.read_bytes())
+    rng = np.random.default_rng(3)
+    spots = sorted(rng.integers(200, len(data) - 200, 5))
+    for at in spots:  # bit rot: 64 bytes overwritten at each spot
+        data[at : at + 64] = rng.integers(0, 256, 64, dtype=np.uint8).tobytes()
+    path.write_bytes(bytes(data))
+    reader = CanLogReader(path)
+    got = list(reader)
+    lost = _lost(got, frames)  # no garbage frame, no duplicate
+    assert [m.timestamp for m in got] == sorted(m.timestamp for m in got)
+    assert 0 < len(lost) <= len(spots) * FRAMES_PER_CONTAINER
+    assert 1 <= sum(reader.counts.values()) <= len(spots)
+    assert set(reader.counts) <= {"resynced", "corrupt_data"}
 
 
 def test_a_text_file_that_is_no_blf(tmp_path: Path) -> None:

@@ -13,12 +13,17 @@ Writing goes through ``can.Logger``. Reading uses python-can's own readers
 garbled CAN frame is logged and skipped, never a crash**, as a replay or a
 daemon needs. For the text formats the reader is resumed on the line after
 the bad one, so frames after the garbage are not lost; each problem is
-recorded as a `LogProblem` naming the file and line. A BLF file cannot be
-resynchronised after corrupt bytes: the frames before them are delivered,
-then reading stops with a problem naming the byte offset. A truncated BLF
-(a logger that lost power) delivers every complete frame and reports the
-truncation. With ``errors="raise"`` every valid frame is still delivered
-first and an `InputDataError` summarising the problems is raised at the end.
+recorded as a `LogProblem` naming the file and line. A BLF file is
+resynchronised after corrupt bytes on the next intact container
+(`roadpreview.canbus.blfscan`): only the frames of the damaged container(s)
+are lost, and the problem names the byte offset and the bytes skipped. A
+truncated BLF (a logger that lost power) delivers every complete frame and
+reports the truncation. Problems are counted by kind in ``counts``
+(``skipped_bad_line``, ``resynced``, ``truncated``, ...); the first
+`MAX_LOGGED_PROBLEMS` of a file are logged one line each, the rest only
+counted and summed up in one line at the end. With ``errors="raise"`` every
+valid frame is still delivered first and an `InputDataError` summarising the
+problems is raised at the end.
 
 Timestamps are what the logger stored, in seconds (normally Unix time):
 
@@ -60,6 +65,7 @@ import re
 import struct
 import time
 import zlib
+from collections import Counter
 from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass
 from datetime import datetime
@@ -70,6 +76,7 @@ import can
 from can.io.blf import BLFParseError, BLFWriter
 from can.io.generic import MessageWriter
 
+from roadpreview.canbus.blfscan import BlfScanner, Resync
 from roadpreview.errors import (
     ConfigError,
     InputDataError,
@@ -99,6 +106,9 @@ _BINARY_FORMATS = (".blf", ".mf4", ".db")
 
 #: python-can's BLF code treats earlier timestamps as "not a Unix time" (1990-01-01)
 _BLF_MIN_TIMESTAMP = 631152000.0
+
+#: problems of one log logged one line each; the rest are counted, summed up at the end
+MAX_LOGGED_PROBLEMS = 10
 
 _CHANNEL_NAME = re.compile(r"^[a-z]*can(\d+)$", re.IGNORECASE)
 
@@ -254,13 +264,16 @@ def write_can_log(path: str | Path, messages: Iterable[can.Message]) -> int:
 
 @dataclass(frozen=True)
 class LogProblem:
-    """One bad spot in a CAN log: where, why, and whether reading stopped there."""
+    """One bad spot in a CAN log: where, why, and whether reading stopped there (or
+    resumed further on: ``resumed_at``, a byte offset). ``kind`` is the counter's key."""
 
     path: str
     reason: str
     line: int | None = None
     byte_offset: int | None = None
     fatal: bool = False
+    kind: str = "skipped_bad_line"
+    resumed_at: int | None = None
 
     def __str__(self) -> str:
         where = self.path
@@ -268,7 +281,12 @@ class LogProblem:
             where += f":{self.line}"
         elif self.byte_offset is not None:
             where += f" (byte {self.byte_offset})"
-        what = "reading stopped" if self.fatal else "frame skipped"
+        if self.fatal:
+            what = "reading stopped"
+        elif self.resumed_at is not None:
+            what = f"reading resumed at byte {self.resumed_at}"
+        else:
+            what = "frame skipped"
         return f"{where}: {self.reason}; {what}"
 
 
@@ -405,9 +423,16 @@ class CanLogReader:
         self.errors = errors
         self.format, self.gzipped = log_format(path)
         self.problems: list[LogProblem] = []
+        self.bytes_skipped = 0  #: bytes of a BLF skipped to resynchronise
+
+    @property
+    def counts(self) -> Counter[str]:
+        """Problems by kind (``LogProblem.kind``) -> count."""
+        return Counter(p.kind for p in self.problems)
 
     def __iter__(self) -> Iterator[can.Message]:
         self.problems = []
+        self.bytes_skipped = 0
         if not self.path.is_file():
             raise InputDataError(f"{self.path}: CAN log not found")
         if self.format == ".blf":
@@ -419,16 +444,30 @@ class CanLogReader:
         for msg in frames:
             msg.channel = channel_number(msg.channel)
             yield msg
+        if len(self.problems) > MAX_LOGGED_PROBLEMS:
+            counts = ", ".join(f"{k} {n}" for k, n in sorted(self.counts.items()))
+            log.warning(
+                "%s: %d problems in all (%s); the first %d were logged",
+                self.path,
+                len(self.problems),
+                counts,
+                MAX_LOGGED_PROBLEMS,
+            )
         if self.problems and self.errors == "raise":
             first = self.problems[0]
             raise InputDataError(f"{first} ({len(self.problems)} problem(s) in this log)")
 
     def _problem(self, problem: LogProblem) -> None:
         self.problems.append(problem)
+        n = len(self.problems)
+        if n > MAX_LOGGED_PROBLEMS and not problem.fatal:
+            return
         if problem.fatal:
             log.error("%s", problem)
         else:
             log.warning("%s", problem)
+        if n == MAX_LOGGED_PROBLEMS:
+            log.warning("%s: further problems of this log are only counted", self.path)
 
     def _open_text(self) -> IO[str]:
         if self.gzipped:
@@ -458,7 +497,12 @@ class CanLogReader:
                 except Exception as exc:
                     if lines.line_no == failed_at:  # nothing consumed: do not loop
                         self._problem(
-                            LogProblem(str(self.path), f"reader stuck ({exc!r})", fatal=True)
+                            LogProblem(
+                                str(self.path),
+                                f"reader stuck ({exc!r})",
+                                fatal=True,
+                                kind="reader_stuck",
+                            )
                         )
                         return
                     failed_at = lines.line_no
@@ -475,6 +519,7 @@ class CanLogReader:
                         f"file ends abruptly ({lines.broken!r})",
                         line=lines.line_no + 1,
                         fatal=True,
+                        kind="truncated",
                     )
                 )
 
@@ -496,48 +541,53 @@ class CanLogReader:
             # asammdf and sqlite3 raise many types for a damaged file; each is this problem
             except Exception as exc:
                 self._problem(
-                    LogProblem(str(self.path), f"not a readable {kind} ({exc!r})", fatal=True)
+                    LogProblem(
+                        str(self.path),
+                        f"not a readable {kind} ({exc!r})",
+                        fatal=True,
+                        kind="unreadable",
+                    )
                 )
                 return
             try:
                 yield from reader
             except Exception as exc:
                 self._problem(
-                    LogProblem(str(self.path), f"corrupt {kind} data ({exc!r})", fatal=True)
+                    LogProblem(
+                        str(self.path),
+                        f"corrupt {kind} data ({exc!r})",
+                        fatal=True,
+                        kind="corrupt_data",
+                    )
                 )
 
     def _iter_blf(self) -> Iterator[can.Message]:
         actual_size = self.path.stat().st_size
         with open(self.path, "rb") as f:
             try:
-                reader = can.BLFReader(f)
+                reader = can.BLFReader(f)  # the file header: size, start of measurement
             except (BLFParseError, struct.error, ValueError) as exc:
                 self._problem(
                     LogProblem(
-                        str(self.path), f"not a BLF file ({exc!r})", byte_offset=0, fatal=True
+                        str(self.path),
+                        f"not a BLF file ({exc!r})",
+                        byte_offset=0,
+                        fatal=True,
+                        kind="unreadable",
                     )
                 )
                 return
             declared_size = int(reader.file_size)
             start_known = bool(reader.start_timestamp)
-            try:
-                yield from reader
-            except (BLFParseError, struct.error, zlib.error, ValueError, EOFError) as exc:
-                self._problem(
-                    LogProblem(
-                        str(self.path),
-                        f"corrupt BLF data ({exc!r})",
-                        byte_offset=f.tell(),
-                        fatal=True,
-                    )
-                )
-                return
+            scanner = BlfScanner(f, f.tell(), self._blf_resync)
+            yield from scanner
         if actual_size < declared_size:
             reason = (
                 f"truncated BLF: {actual_size} of {declared_size} bytes"
                 " (frames in the missing part are lost)"
             )
-        elif actual_size > declared_size:
+            kind = "truncated"
+        elif actual_size > declared_size and not scanner.resyncs:  # else: inserted bytes
             reason = (
                 f"BLF header never finalised (it says {declared_size} bytes, the file has"
                 f" {actual_size}): the logger was not closed, its last buffered frames"
@@ -545,9 +595,37 @@ class CanLogReader:
             )
             if not start_known:
                 reason += " and, with no start date, times are relative to the start"
+            kind = "unfinished"
         else:
             return
-        self._problem(LogProblem(str(self.path), reason, byte_offset=actual_size, fatal=True))
+        self._problem(
+            LogProblem(str(self.path), reason, byte_offset=actual_size, fatal=True, kind=kind)
+        )
+
+    def _blf_resync(self, event: Resync) -> None:
+        self.bytes_skipped += event.skipped
+        if event.resumed_at is None:
+            reason = f"corrupt BLF data ({event.reason}); no intact container after it"
+            self._problem(
+                LogProblem(
+                    str(self.path),
+                    reason,
+                    byte_offset=event.offset,
+                    fatal=True,
+                    kind="corrupt_data",
+                )
+            )
+            return
+        reason = f"corrupt BLF data ({event.reason}); {event.skipped} bytes skipped"
+        self._problem(
+            LogProblem(
+                str(self.path),
+                reason,
+                byte_offset=event.offset,
+                kind="resynced",
+                resumed_at=event.resumed_at,
+            )
+        )
 
 
 def read_can_log(

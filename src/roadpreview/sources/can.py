@@ -3,8 +3,9 @@ through the DBC and the input mapping into `ImuSample` / `SpeedSample`.
 
 Frames of unknown IDs are ignored; garbled frames, failed integrity checks and
 values out of the DBC's range are logged (once per kind) and counted in
-``errors``; nothing downstream sees ``can.Message``. A sample stamped before
-its predecessor in a log is dropped and counted (the log's order is kept).
+``errors`` (and by kind in ``problems``); nothing downstream sees ``can.Message``.
+A sample stamped before its predecessor in a log is dropped and counted (the log's
+order is kept).
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from collections.abc import Callable, Iterable, Iterator
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 
 import can
@@ -75,6 +77,22 @@ class CanLogSource:
     def errors(self) -> int:
         garbled = len(self._reader.problems) if self._reader is not None else 0
         return self.decoder.stats.skipped + garbled + self.out_of_order
+
+    @property
+    def problems(self) -> Counter[str]:
+        """Problems by kind -> count: the log reader's (``skipped_bad_line``,
+        ``resynced``, ``truncated``, ...), the decoder's and this source's
+        (``out_of_order``)."""
+        counts: Counter[str] = Counter()
+        if self._reader is not None:
+            counts.update(self._reader.counts)
+        decoded = getattr(self.decoder, "problems", None)
+        if not isinstance(decoded, Mapping):  # the decoder's reasons by their names
+            decoded = {str(k.value): n for k, n in self.decoder.stats.problems.items()}
+        counts.update(decoded)
+        if self.out_of_order:
+            counts["out_of_order"] += self.out_of_order
+        return counts
 
     def __iter__(self) -> Iterator[InputSample]:
         self._reader = CanLogReader(self.path)

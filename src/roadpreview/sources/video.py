@@ -3,27 +3,38 @@
 One clock rule for a file, whoever reads it (replay, the daemon, the
 evaluation): frame ``i`` is stamped ``start_s`` + the ``i``-th time of
 ``frames.csv`` (``frame,t_s``) when there is one, else ``start_s + i / fps``.
-A frame that cannot be decoded is yielded with ``image=None`` (the pipeline
-counts it as a vision failure) and counted in ``errors``; the stream ends with
-the file (or after 10 undecodable frames in a row). A device or stream is
+``frames.csv`` must have one row per frame (else `InputDataError` naming it and
+both counts, before any frame is read); a bad row (`read_frame_times`) costs
+that row's time only, interpolated from its neighbours, the other frames keep
+theirs. A frame that cannot be decoded, or that decodes into something that is
+not the scene (`roadpreview.vision.frame_check`: its content jumps as no ego
+motion can; a damaged stream's frames until it is good again), is yielded with
+``image=None`` (the pipeline counts it as a vision failure) and counted in
+``errors`` and ``problems``; the file is read to its last frame (without a
+frame count: until 10 undecodable frames in a row). A device or stream is
 stamped ``time.time()`` when the frame is read, and reopened after a failure.
 """
 
 from __future__ import annotations
 
+import bisect
 import csv
 import logging
 import math
 import threading
 import time
+from collections import Counter
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 
 from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.types import CameraFrame, Image
+from roadpreview.vision.frame_check import JUMP_GREY, FrameIntegrity, Verdict, thumbnail
 
 log = logging.getLogger(__name__)
 
@@ -43,18 +54,138 @@ def as_image(array: object) -> Image | None:
     return None
 
 
-def frame_times(frames_csv: Path) -> Iterator[float]:
-    """The time stamps of ``frames.csv`` (``frame,t_s``), s; bad rows logged and skipped."""
+def increasing_rows(t: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """The rows of ``t`` that belong to its longest strictly increasing run of finite
+    values (rows need not be adjacent): the time stamps that agree with each other.
+    A stamp that jumps ahead or back, or is NaN, is left out; the rest keep theirs."""
+    ok = np.isfinite(t)
+    idx = np.flatnonzero(ok)
+    if idx.size < 2 or bool(np.all(np.diff(t[idx]) > 0)):
+        return ok
+    # patience sorting: tails[k] = row ending the best run of length k + 1
+    tails: list[int] = []
+    tail_t: list[float] = []
+    prev = np.full(t.size, -1)
+    for i in idx.tolist():
+        ti = float(t[i])
+        k = bisect.bisect_left(tail_t, ti)
+        if k > 0:
+            prev[i] = tails[k - 1]
+        if k == len(tails):
+            tails.append(i)
+            tail_t.append(ti)
+        else:
+            tails[k] = i
+            tail_t[k] = ti
+    keep = np.zeros(t.size, dtype=bool)
+    i = tails[-1]
+    while i >= 0:
+        keep[i] = True
+        i = int(prev[i])
+    return keep
+
+
+def fill_times(t: NDArray[np.float64], good: NDArray[np.bool_], dt: float) -> NDArray[np.float64]:
+    """``t`` with the rows not ``good`` interpolated linearly (in the row index) from the
+    good rows around them; before the first and after the last good row, extrapolated by
+    the good rows' median interval (``dt`` if there is only one good row)."""
+    idx = np.flatnonzero(good)
+    rows = np.arange(t.size, dtype=np.float64)
+    if idx.size >= 2:
+        dt = float(np.median(np.diff(t[idx]) / np.diff(idx)))
+    out = np.interp(rows, idx.astype(np.float64), t[idx])
+    out[: idx[0]] = t[idx[0]] - dt * (idx[0] - rows[: idx[0]])
+    out[idx[-1] + 1 :] = t[idx[-1]] + dt * (rows[idx[-1] + 1 :] - idx[-1])
+    return out
+
+
+@dataclass(frozen=True)
+class FrameTimes:
+    """The time stamps of a ``frames.csv`` (``frame,t_s``), one per row, s: a bad row (not
+    two fields, a frame number that is not its row's, a time that is not a number or not
+    finite, or out of order with the rows around it) gets a time interpolated from its
+    neighbours; ``bad_rows`` says which (line number, why)."""
+
+    path: Path
+    t_s: NDArray[np.float64]
+    bad_rows: tuple[tuple[int, str], ...]
+
+    def __len__(self) -> int:
+        return int(self.t_s.size)
+
+    def log_bad_rows(self, limit: int = 10) -> None:
+        """Warn about the bad rows: one line each for the first ``limit``, then one sum."""
+        for line_no, why in self.bad_rows[:limit]:
+            log.warning(
+                "%s:%d: %s; the frame's time is interpolated from its neighbours",
+                self.path,
+                line_no,
+                why,
+            )
+        if len(self.bad_rows) > limit:
+            log.warning(
+                "%s: %d bad rows in all (of %d), each frame's time interpolated",
+                self.path,
+                len(self.bad_rows),
+                len(self),
+            )
+
+
+def read_frame_times(frames_csv: Path, *, fps: float = 30.0) -> FrameTimes:
+    """Read ``frames.csv`` (`FrameTimes`); ``fps`` extrapolates when only one row is good.
+
+    Raises `InputDataError` for a wrong header or a table without two good rows."""
     with frames_csv.open(newline="") as fh:
         reader = csv.reader(fh)
         header = next(reader, None)
         if header != ["frame", "t_s"]:
             raise InputDataError(f"{frames_csv}: header must be 'frame,t_s', got {header}")
+        times: list[float] = []
+        why: dict[int, tuple[int, str]] = {}  # row -> (line number, reason)
         for line_no, row in enumerate(reader, start=2):
-            try:
-                yield float(row[1])
-            except (IndexError, ValueError):
-                log.warning("%s:%d: bad time stamp %r skipped", frames_csv, line_no, row)
+            if not row or not "".join(row).strip():
+                continue  # a blank line is no row
+            k = len(times)
+            t = math.nan
+            if len(row) != 2:
+                why[k] = (line_no, f"{len(row)} fields, not 2 ({','.join(row)[:40]!r})")
+            elif row[0].strip() != str(k):
+                why[k] = (line_no, f"frame {row[0][:20]!r} in the row of frame {k}")
+            else:
+                try:
+                    t = float(row[1])
+                except ValueError:
+                    why[k] = (line_no, f"t_s {row[1][:20]!r} is not a number")
+                else:
+                    if not math.isfinite(t):
+                        why[k] = (line_no, f"t_s {row[1]!r} is not finite")
+            times.append(t)
+    t_s = np.array(times, dtype=np.float64)
+    good = increasing_rows(t_s)
+    line_of = {k: line_no for k, (line_no, _) in why.items()}
+    for late in np.flatnonzero(np.isfinite(t_s) & ~good).tolist():
+        why[late] = (line_of.get(late, late + 2), f"t_s {t_s[late]:.6f} is out of order")
+    if int(good.sum()) < min(2, t_s.size) or t_s.size == 0:
+        raise InputDataError(
+            f"{frames_csv}: {int(good.sum())} usable time stamps in {t_s.size} rows"
+        )
+    bad = tuple(why[k] for k in sorted(why))
+    filled = fill_times(t_s, good, 1.0 / fps) if bad else t_s
+    return FrameTimes(frames_csv, filled, bad)
+
+
+def frame_times(frames_csv: Path) -> Iterator[float]:
+    """The time stamps of ``frames.csv``, s (`read_frame_times`: bad rows interpolated)."""
+    yield from (float(t) for t in read_frame_times(frames_csv).t_s)
+
+
+def _check_rows(table: FrameTimes, n_frames: int, what: str) -> None:
+    """Refuse a frame table whose rows do not match the frames one to one."""
+    if n_frames > 0 and len(table) != n_frames:
+        raise InputDataError(
+            f"{table.path}: {len(table)} time stamps for the {n_frames} frames of {what};"
+            " frames.csv needs one row per frame"
+        )
 
 
 class VideoFileSource:
@@ -81,14 +212,31 @@ class VideoFileSource:
         cap.release()
         self.start_s = start_s
         self.frames_csv = Path(frames_csv) if frames_csv else None
-        if self.frames_csv is not None and not self.frames_csv.is_file():
-            raise InputDataError(f"{self.frames_csv}: frame time stamps not found")
+        self.frame_table: FrameTimes | None = None
+        if self.frames_csv is not None:
+            if not self.frames_csv.is_file():
+                raise InputDataError(f"{self.frames_csv}: frame time stamps not found")
+            self.frame_table = read_frame_times(self.frames_csv, fps=self.fps)
+            _check_rows(self.frame_table, self.n_frames, f"the video {self.path}")
         self.decode_failures = 0  #: frames that could not be decoded
+        self.corrupt_frames = 0  #: decoded frames dropped as not the scene (`frame_check`)
         self._closed = False
 
     @property
     def errors(self) -> int:
-        return self.decode_failures
+        """Frames yielded without image: undecodable or corrupt."""
+        return self.decode_failures + self.corrupt_frames
+
+    @property
+    def problems(self) -> Counter[str]:
+        """Problems by kind: ``undecodable_frame``, ``corrupt_frame``, ``bad_time_row``
+        (a frames.csv row whose time was interpolated)."""
+        counts: Counter[str] = Counter()
+        counts["undecodable_frame"] = self.decode_failures
+        counts["corrupt_frame"] = self.corrupt_frames
+        if self.frame_table is not None:
+            counts["bad_time_row"] = len(self.frame_table.bad_rows)
+        return +counts  # the kinds that happened
 
     def check_size(self, size: tuple[int, int]) -> None:
         """Raise if the frames are not ``size`` (width, height): the calibration's."""
@@ -99,34 +247,148 @@ class VideoFileSource:
             )
 
     def __iter__(self) -> Iterator[CameraFrame]:
+        """The frames, each yielded once the next one is read: a frame decoded just
+        before an undecodable one is dropped too (it is decoded only in part)."""
+        table = self.frame_table
+        if table is not None:
+            table.log_bad_rows()
+        self.decode_failures = self.corrupt_frames = 0
+        report = _DamageReport(self.path)
+        pending: tuple[CameraFrame, str] | None = None
+        for frame, status in self._decoded(report):
+            if pending is not None:
+                held, held_status = pending
+                if status == "undecodable" and held_status == "good":
+                    held, held_status = CameraFrame(held.t_s, None, held.index), "partial"
+                yield self._account(held, held_status, report)
+            pending = (frame, status)
+        if pending is not None:
+            yield self._account(*pending, report)
+        report.close()
+
+    def _account(self, frame: CameraFrame, status: str, report: _DamageReport) -> CameraFrame:
+        """Count and report ``frame`` as it leaves the source."""
+        if status == "good":
+            report.good(frame.index)
+        elif status == "undecodable":
+            self.decode_failures += 1
+            report.bad(frame.index, "cannot be decoded")
+        else:
+            self.corrupt_frames += 1
+            report.bad(frame.index, status)
+        return frame
+
+    def _decoded(self, report: _DamageReport) -> Iterator[tuple[CameraFrame, str]]:
+        """Each frame with its status: ``good``, ``undecodable`` (no image) or why it is
+        dropped (`FrameIntegrity`; no image)."""
         cap = cv2.VideoCapture(str(self.path))
-        times = frame_times(self.frames_csv) if self.frames_csv is not None else None
-        i = 0
-        misses = 0
+        table = self.frame_table
+        integrity = FrameIntegrity(max_untrusted=max(1, round(UNTRUSTED_S * self.fps)))
+        i = misses = 0
         try:
             while not self._closed:
                 ok, image = cap.read()
-                t_rel = next(times, None) if times is not None else i / self.fps
-                if t_rel is None:
+                if table is not None and i >= len(table):
+                    if ok:
+                        log.warning(
+                            "%s: more frames than the %d rows of %s; the rest is not read",
+                            self.path,
+                            len(table),
+                            table.path,
+                        )
                     break
-                if not ok:
-                    # a corrupt frame inside the file: report it, try the next ones
-                    if i >= self.n_frames - 1 or misses > MAX_MISSES:
+                t = self.start_s + (float(table.t_s[i]) if table is not None else i / self.fps)
+                frame = as_image(image) if ok else None
+                if frame is None:
+                    known_end = self.n_frames > 0 and i >= self.n_frames - 1
+                    if known_end or (self.n_frames <= 0 and misses >= MAX_MISSES):
                         break
                     misses += 1
-                    self.decode_failures += 1
-                    log.warning("%s: frame %d cannot be decoded; skipped", self.path, i)
-                    yield CameraFrame(self.start_s + t_rel, None, i)
-                    i += 1
-                    continue
-                misses = 0
-                yield CameraFrame(self.start_s + t_rel, as_image(image), i)
+                    integrity.undecodable()
+                    yield CameraFrame(t, None, i), "undecodable"
+                else:
+                    misses = 0
+                    verdict = integrity.check(thumbnail(frame))
+                    if verdict is Verdict.GOOD:
+                        yield CameraFrame(t, frame, i), "good"
+                    elif verdict is Verdict.CORRUPT:
+                        why = f"is corrupt (content jumps {integrity.last_jump:.1f} grey levels,"
+                        yield CameraFrame(t, None, i), f"{why} limit {JUMP_GREY:g})"
+                    else:
+                        yield CameraFrame(t, None, i), "is not trusted yet after damage"
                 i += 1
         finally:
             cap.release()
 
     def close(self) -> None:
         self._closed = True
+
+
+#: after damage, frames dropped at most while waiting for the picture to re-anchor, s
+UNTRUSTED_S = 2.0
+
+
+class _DamageReport:
+    """The log lines of a video's damage: one when a stretch of frames without image
+    begins (why), one when good frames resume (with the count); after
+    `MAX_DAMAGE_REPORTS` stretches only counted, summed up at the end."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.stretches = 0
+        self._bad_since: int | None = None
+        self._bad = 0
+        self._last = -1
+
+    def bad(self, i: int, why: str) -> None:
+        self._last = i
+        if self._bad_since is None:
+            self._bad_since = i
+            self.stretches += 1
+            if self.stretches <= MAX_DAMAGE_REPORTS:
+                log.warning(
+                    "%s: frame %d %s; frames without image until the video is good again",
+                    self.path,
+                    i,
+                    why if why != "partial" else "is decoded only in part",
+                )
+        self._bad += 1
+
+    def good(self, i: int) -> None:
+        self._last = i
+        if self._bad_since is None:
+            return
+        if self.stretches <= MAX_DAMAGE_REPORTS:
+            log.warning(
+                "%s: frames %d-%d (%d) undecodable or corrupt; good again from frame %d",
+                self.path,
+                self._bad_since,
+                i - 1,
+                self._bad,
+                i,
+            )
+        self._bad_since, self._bad = None, 0
+
+    def close(self) -> None:
+        if self._bad_since is not None and self.stretches <= MAX_DAMAGE_REPORTS:
+            log.warning(
+                "%s: frames %d-%d (%d) undecodable or corrupt, to the end of the video",
+                self.path,
+                self._bad_since,
+                self._last,
+                self._bad,
+            )
+        if self.stretches > MAX_DAMAGE_REPORTS:
+            log.warning(
+                "%s: %d damaged stretches in all; the first %d were logged",
+                self.path,
+                self.stretches,
+                MAX_DAMAGE_REPORTS,
+            )
+
+
+#: damaged stretches of one video logged one by one
+MAX_DAMAGE_REPORTS = 10
 
 
 class CameraDeviceSource:
@@ -330,6 +592,10 @@ class ImageSequenceSource:
         self.start_s = start_s
         csv_path = Path(frames_csv) if frames_csv else self.folder / "frames.csv"
         self.frames_csv = csv_path if csv_path.is_file() else None
+        self.frame_table: FrameTimes | None = None
+        if self.frames_csv is not None:
+            self.frame_table = read_frame_times(self.frames_csv, fps=fps)
+            _check_rows(self.frame_table, len(self.files), f"the images in {self.folder}")
         first = cv2.imread(str(self.files[0]), cv2.IMREAD_COLOR)
         self.size = (0, 0) if first is None else (int(first.shape[1]), int(first.shape[0]))
         self.decode_failures = 0
@@ -340,13 +606,13 @@ class ImageSequenceSource:
         return self.decode_failures
 
     def __iter__(self) -> Iterator[CameraFrame]:
-        times = frame_times(self.frames_csv) if self.frames_csv is not None else None
+        table = self.frame_table
+        if table is not None:
+            table.log_bad_rows()
         for i, path in enumerate(self.files):
             if self._closed:
                 return
-            t_rel = next(times, None) if times is not None else i / self.fps
-            if t_rel is None or not math.isfinite(t_rel):
-                return
+            t_rel = float(table.t_s[i]) if table is not None else i / self.fps
             image = as_image(cv2.imread(str(path), cv2.IMREAD_COLOR))
             if image is None:
                 self.decode_failures += 1
