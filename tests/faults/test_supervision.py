@@ -1,25 +1,44 @@
-"""Issue 17, item 4: the run loop supervises its sources. A source whose iterator raises is
-logged, counted and restarted (a file source resumes after its last sample, a live one
+"""Issue 17, items 4-6. The run loop supervises its sources: a source whose iterator raises
+is logged, counted and restarted (a file source resumes after its last sample, a live one
 after a backoff); one that keeps failing ends the run with `SourceFailed` after the sinks
-are closed. The per-source problem counts reach `RunSummary.source_problems`."""
+are closed. The replay's summary lists every input's problems and the inputs that gave
+nothing (exit 1 unless ``--allow-missing``); a TOML that is no TOML text is a config
+error; ``simulate --duration`` sizes the road."""
 
 from __future__ import annotations
 
+import json
 import logging
 import math
+import re
 import threading
 import time
 from collections import Counter
-from collections.abc import Iterator
-from dataclasses import dataclass, field
-from typing import Any, cast
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
+import can
+import numpy as np
 import pytest
 
+from roadpreview.camera import CameraModel
+from roadpreview.canbus.logio import CanLogWriter
+from roadpreview.canbus.mapping import load_mapping
+from roadpreview.cli.main import main
+from roadpreview.errors import ConfigError
 from roadpreview.loop import RunSummary, SourceFailed, Supervision, run
 from roadpreview.pipeline import FrameResult
+from roadpreview.sim.dataset import drive_config
+from roadpreview.sim.presets import PRESETS
+from roadpreview.sim.road import generate_road
+from roadpreview.sim.scenario import ScenarioConfig
 from roadpreview.sinks import Sink
 from roadpreview.types import Alert, CameraFrame, FusionMode, ImuSample, Sample, Status
+
+if TYPE_CHECKING:
+    from roadpreview.sim.recording import Recording
 
 FAST = Supervision(max_restarts=3, backoff_s=0.01, max_backoff_s=0.02, healthy_s=60.0)
 
@@ -225,3 +244,176 @@ def test_supervision_refuses_nonsense() -> None:
         Supervision(max_restarts=-1)
     with pytest.raises(ValueError, match="backoff_s"):
         Supervision(backoff_s=3.0, max_backoff_s=1.0)
+
+
+# -- honest summaries and exit codes (issue 17, item 5) ---------------------------------
+@pytest.fixture(scope="module")
+def drive(make_recording: Callable[..., Recording]) -> Recording:
+    # the arguments of tests/daemon/conftest.py's small_drive: the session's cache reuses it
+    return make_recording("controlled", seed=0, duration_s=3.0, width=320, height=180)
+
+
+@pytest.fixture(autouse=True)
+def _restore_logging() -> Iterator[None]:
+    names = ("", "roadpreview.progress")
+    levels = {n: logging.getLogger(n).level for n in names}
+    yield
+    for n, level in levels.items():
+        logging.getLogger(n).setLevel(level)
+
+
+def _replay(drive: Recording, out: Path, *extra: str) -> tuple[int, dict[str, Any], list[Any]]:
+    """``roadpreview replay`` of the drive's video (its calibration and clock) with the
+    ``extra`` inputs: exit code, summary.json, the alerts as (id, crossing time, height)."""
+    args = ["replay", str(drive.video), "--camera", str(drive.folder / "camera.toml")]
+    args += ["--frames-csv", str(drive.frames_csv), "--video-start", repr(drive.t0_unix_s)]
+    code = main([*args, *extra, "--out", str(out), "-q"])
+    summary = json.loads((out / "summary.json").read_text())
+    lines = (out / "alerts.jsonl").read_text().splitlines()
+    alerts = [(a["alert_id"], a["t_s"], a["height_mm"]) for a in map(json.loads, lines)]
+    return code, summary, alerts
+
+
+@pytest.fixture(scope="module")
+def without_imu(drive: Recording, tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """The clean run of the part that is intact: the video without any IMU input."""
+    return _replay(drive, tmp_path_factory.mktemp("video_only") / "out")
+
+
+def test_an_empty_can_log_is_reported_and_fails_the_replay_unless_allowed(
+    drive: Recording, without_imu: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    empty = tmp_path / "empty.blf"
+    empty.write_bytes(b"")
+    code, summary, alerts = _replay(drive, tmp_path / "strict", "--can", str(empty))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert err[-1] == (
+        f"roadpreview replay: error: unusable input {empty}: the CAN log holds no frame "
+        "(the drive ran without it; --allow-missing to accept)"
+    )
+    assert summary["unusable_inputs"] == [
+        {"path": str(empty), "reason": f"{empty}: the CAN log holds no frame"}
+    ]
+    assert summary["frames"] == without_imu[1]["frames"] == 90  # the whole drive ran
+    assert "no IMU input: vision-only fusion (VISUAL_ONLY)" in summary["clock"]["rules"]
+    assert summary["modes"]["FUSED"]["seconds"] == 0.0
+    assert alerts == without_imu[2]  # the intact part gives what it gives alone
+    allowed = ("--can", str(empty), "--allow-missing", "--end", "1")  # 1 s is enough here
+    code, summary, _ = _replay(drive, tmp_path / "allowed", *allowed)
+    assert code == 0
+    assert summary["unusable_inputs"][0]["path"] == str(empty)
+
+
+def test_a_can_log_of_which_no_frame_maps_is_unusable(
+    drive: Recording, without_imu: Any, tmp_path: Path
+) -> None:
+    foreign = tmp_path / "other_car.log"
+    writer = CanLogWriter(foreign)  # another car's ids: nothing the mapping knows
+    for i in range(300):
+        t = drive.t0_unix_s + 0.01 * i
+        writer.write(can.Message(timestamp=t, arbitration_id=0x7A0 + i % 3, data=[i % 256] * 8))
+    writer.close()
+    code, summary, alerts = _replay(drive, tmp_path / "out", "--can", str(foreign))
+    assert code == 1
+    (bad,) = summary["unusable_inputs"]
+    assert bad["path"] == str(foreign)
+    assert "none of its 300 frames maps to an IMU or speed sample" in bad["reason"]
+    assert summary["modes"]["FUSED"]["seconds"] == 0.0
+    assert alerts == without_imu[2]
+
+
+def test_an_imu_csv_without_a_valid_row_is_unusable(
+    drive: Recording, without_imu: Any, tmp_path: Path
+) -> None:
+    imu = tmp_path / "imu.csv"
+    imu.write_text("t_s,gyro_x\n")
+    code, summary, alerts = _replay(drive, tmp_path / "out", "--imu-csv", str(imu))
+    assert code == 1
+    (bad,) = summary["unusable_inputs"]
+    assert bad["path"] == str(imu)
+    assert bad["reason"].startswith(f"{imu}:1: header")
+    assert alerts == without_imu[2]
+
+
+def test_the_summary_lists_every_input_problem_and_the_mode_shares(
+    drive: Recording, tmp_path: Path
+) -> None:
+    code, summary, _ = _replay(drive, tmp_path / "out", "--can", str(drive.can_log()))
+    assert code == 0
+    assert summary["unusable_inputs"] == []
+    can_log = str(drive.can_log())
+    assert (
+        set(summary["inputs_problems"])
+        == set(summary["source_errors"])
+        == {
+            str(drive.video),
+            can_log,
+        }
+    )
+    assert summary["source_errors"][can_log] == 0
+    assert all(n > 0 for p in summary["inputs_problems"].values() for n in p.values())
+    assert summary["thread_deaths"] == {}
+    shares = summary["modes"]
+    assert sum(m["share"] for m in shares.values()) == pytest.approx(1.0, abs=1e-3)
+    drive_s = summary["clock"]["last_frame_rel_s"] - summary["clock"]["first_frame_rel_s"]
+    assert sum(m["seconds"] for m in shares.values()) == pytest.approx(drive_s, abs=2e-3)
+    # the log's IMU fuses once its time offset is estimated, and stays fused to the end
+    fused_at = next(c["t_rel_s"] for c in summary["mode_changes"] if c["mode"] == "FUSED")
+    assert summary["mode_changes"][-1]["mode"] == "FUSED"
+    last = summary["clock"]["last_frame_rel_s"]
+    assert shares["FUSED"]["seconds"] == pytest.approx(last - fused_at, abs=2e-3)
+    assert 0 < shares["FUSED"]["share"] < 1
+
+
+# -- configuration files and long drives (issue 17, items 5 and 6) ----------------------
+@pytest.mark.parametrize("kind", ["binary", "folder", "latin-1"])
+def test_a_camera_toml_that_is_no_toml_text_is_a_config_error(kind: str, tmp_path: Path) -> None:
+    path = tmp_path / "camera.toml"
+    if kind == "binary":
+        path.write_bytes(bytes(range(256)) * 4)
+    elif kind == "folder":
+        path.mkdir()
+    else:
+        path.write_bytes("[camera]\nname = 'Kamera für vorne'\n".encode("latin-1"))
+    with pytest.raises(ConfigError) as exc:
+        CameraModel.load(path)
+    message = str(exc.value)
+    assert message.startswith(f"{path}: ")
+    assert "\n" not in message
+    with pytest.raises(ConfigError, match=re.escape(str(path))):
+        load_mapping(path)  # the other TOMLs share the loader
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_every_preset_sizes_its_road_for_a_300_s_drive(name: str) -> None:
+    base = drive_config(name, 0)
+    with pytest.raises(ConfigError, match="too short"):  # what the CLI did before
+        replace(base, motion=replace(base.motion, duration_s=300.0)).validate()
+    cfg = base.with_duration(300.0)
+    cfg.validate()
+    assert cfg.motion.duration_s == 300.0
+    assert cfg.with_duration(300.0) == cfg  # long enough: unchanged
+    assert base.with_duration(base.motion.duration_s).motion.road == base.motion.road
+    # the road holds the whole drive: at least the ego's planned distance ahead of its start
+    v_min = min([k.speed_kmh for k in cfg.motion.ego_speed_knots] or [cfg.motion.ego_speed_kmh])
+    assert cfg.motion.road.length_m > cfg.motion.ego_start_x_m + 300.0 * v_min / 3.6
+    road = generate_road(cfg.motion.road, np.random.default_rng(0))
+    if cfg.motion.road.anomaly_density_per_km > 0:  # random anomalies spread over all of it
+        far = [a for a in road.anomalies if a.start_x_m > base.motion.road.length_m]
+        assert len(far) >= 0.5 * cfg.motion.road.anomaly_density_per_km * (
+            (cfg.motion.road.length_m - base.motion.road.length_m) / 1000
+        )
+
+
+def test_simulate_duration_on_the_command_line(tmp_path: Path) -> None:
+    out = tmp_path / "rec"
+    args = ["simulate", "--preset", "controlled", "--duration", "120", "--resolution", "160x90"]
+    assert main([*args, "--write-scenario", "--out", str(out), "-q"]) == 0
+    written = ScenarioConfig.load(out / "scenario.toml")
+    assert written.motion.duration_s == 120.0
+    assert written.motion.road.length_m > drive_config("controlled", 0).motion.road.length_m
+    short = ["simulate", "--preset", "controlled", "--duration", "0.5", "--resolution", "160x90"]
+    assert main([*short, "--out", str(tmp_path / "short"), "-q"]) == 0
+    frames = (tmp_path / "short" / "frames.csv").read_text().splitlines()
+    assert len(frames) - 1 == 15  # 0.5 s at 30 fps
