@@ -14,9 +14,13 @@ are thin compositions of it (`roadpreview.apps`, `roadpreview.eval.runner`).
 2. **Push** each sample into the pipeline. A camera frame not after the previous one is
    skipped and counted. After each frame the loop hands the `FrameResult` and the
    status to every sink, tracks the mode changes, and every ``status_period_s`` (on the
-   frames' clock) sends the status to every sink: one schedule for a bus and a log.
-3. **Watchdogs** see every sample and are polled while nothing arrives; they log, count,
-   and may inject samples (an image-less frame while the camera is lost).
+   frames' clock) sends the status to every sink: one schedule for a bus and a log. In a
+   live run the schedule also runs between frames (after the first one), so RP_STATUS
+   keeps its cycle when the camera stalls, until the camera watchdog's image-less frames
+   take over.
+3. **Watchdogs** see every sample and are polled after each batch of released samples
+   (at least every ``poll_s``); they log, count, and may inject samples (an image-less
+   frame while the camera is lost).
 4. **End.** At the end of input, on ``stop`` (a signal) or on an error: the detector's
    held-back events are flushed as alerts, and every sink is closed with the
    `RunSummary` (``interrupted`` says whether the input was cut short).
@@ -268,6 +272,8 @@ class _LiveMerge:
         self.queue: queue.Queue[Sample | _End] = queue.Queue(maxsize=queue_size)
         self.queue_drops = 0  #: samples lost because the queue was full
         self.frames_dropped = 0  #: frames skipped because a newer one was due
+        #: called with the released samples' clock after each batch (the status cycle)
+        self.on_tick: Callable[[float], None] | None = None
         self._threads = [
             threading.Thread(target=self._pump, args=(s,), name=f"source:{s.name}", daemon=True)
             for s in sources
@@ -352,9 +358,11 @@ class _LiveMerge:
             yield from ((s, False) for i, s in enumerate(ready) if i not in skip)
             if ended:
                 return
-            if not ready:
-                for wd in watchdogs:  # on the released samples' clock
-                    yield from ((s, True) for s in wd.check(horizon))
+            # also while CAN samples keep coming: a silent camera is noticed on time
+            for wd in watchdogs:  # on the released samples' clock
+                yield from ((s, True) for s in wd.check(horizon))
+            if self.on_tick is not None:
+                self.on_tick(horizon)
 
     def close(self) -> None:
         for s in self.sources:
@@ -402,6 +410,7 @@ def run(
                 queue_size=queue_size,
                 supervisor=supervisor,
             )
+            merge.on_tick = state.tick
             stream = merge.samples(watchdogs, poll_s=poll_s, keep_running=keep_running)
         else:
             supervised = [supervisor.samples(s) for s in sources]
@@ -571,6 +580,16 @@ class _LoopState:
             self.next_status = r.t + self.period
         if not injected:
             summary.frame_ms.add((time.perf_counter() - c0) * 1e3)
+
+    def tick(self, t: float) -> None:
+        """No sample is due up to ``t``: the status, if its period has passed since the last
+        one (after the first frame: before it there is nothing to report)."""
+        if self.summary.last is None or not math.isfinite(t) or t < self.next_status:
+            return
+        t = max(t, self.last_t)
+        status = self._status()
+        self._each_sink(lambda s: s.on_status(t, status))
+        self.next_status = t + self.period
 
     def finish(self) -> None:
         """The end of input: the held-back events as alerts, to every sink."""
