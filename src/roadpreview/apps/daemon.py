@@ -143,6 +143,8 @@ class DaemonSummary:
     watchdog_withheld: int = 0  #: times the systemd watchdog pings were withheld (unhealthy)
     #: exceptions out of a source's reader thread (the loop restarted it), per source
     thread_deaths: dict[str, int] = field(default_factory=dict)
+    #: per source: reason -> count (`RunSummary.source_problems`)
+    source_problems: dict[str, dict[str, int]] = field(default_factory=dict)
     #: per arbitration id: output frames the bus refused (e.g. ``{0x201: 1}``: RP_STATUS)
     send_failures: dict[int, int] = field(default_factory=dict)
     error: str = ""  #: why the daemon gave up ('' if it stopped normally)
@@ -459,6 +461,7 @@ class Daemon:
             s.frame_ms = r.frame_ms
             s.can_queue_drops = r.queue_drops
             s.thread_deaths = dict(r.thread_deaths)
+            s.source_problems = {name: dict(p) for name, p in r.source_problems.items()}
         s.camera_read_failures = self.camera.errors
         s.status_lines = self.monitor.lines if self.monitor is not None else 0
         if self.player is not None:
