@@ -14,15 +14,32 @@ are thin compositions of it (`roadpreview.apps`, `roadpreview.eval.runner`).
 2. **Push** each sample into the pipeline. A camera frame not after the previous one is
    skipped and counted. After each frame the loop hands the `FrameResult` and the
    status to every sink, tracks the mode changes, and every ``status_period_s`` (on the
-   frames' clock) sends the status to every sink: one schedule for a bus and a log.
-3. **Watchdogs** see every sample and are polled while nothing arrives; they log, count,
-   and may inject samples (an image-less frame while the camera is lost).
+   frames' clock) sends the status to every sink: one schedule for a bus and a log. In a
+   live run the schedule also runs between frames (after the first one), so RP_STATUS
+   keeps its cycle when the camera stalls, until the camera watchdog's image-less frames
+   take over.
+3. **Watchdogs** see every sample and are polled after each batch of released samples
+   (at least every ``poll_s``); they log, count, and may inject samples (an image-less
+   frame while the camera is lost).
 4. **End.** At the end of input, on ``stop`` (a signal) or on an error: the detector's
    held-back events are flushed as alerts, and every sink is closed with the
    `RunSummary` (``interrupted`` says whether the input was cut short).
 
 A sink that raises is logged and counted in ``summary.sink_errors``; it does not stop
 the run.
+
+**Supervision.** Every source is read through a supervisor (`Supervision`): an exception
+out of its iterator is logged (``event=thread_died source=... error=...``), counted
+(``summary.thread_deaths``, and ``thread_died`` / ``restarted`` among the source's
+problems) and the source is iterated again: a live source after a backoff (doubling up
+to ``max_backoff_s``), a file source at once, resuming after the last sample it gave. A
+source that dies ``max_restarts`` times in a row (a live one that ran ``healthy_s``
+between two deaths, a file one that got past its last failure, starts the count again)
+ends the run: the sinks are closed with ``summary.error`` set and `SourceFailed`
+(carrying the summary) is raised, so that the daemon exits non-zero and systemd's
+``Restart=on-failure`` acts. At the end the sources' problem counts (the ``problems``
+counter a source, its inner source or its decoder exposes) are collected into
+``summary.source_problems``.
 """
 
 from __future__ import annotations
@@ -34,11 +51,13 @@ import queue
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections import Counter
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import FrameType
 from typing import Any, Protocol
 
+from roadpreview.errors import OperationError
 from roadpreview.fusion.mode_machine import gyro_state, mode_reason
 from roadpreview.pipeline.pipeline import FrameResult
 from roadpreview.pipeline.run_summary import FrameTimes, RunSummary
@@ -127,6 +146,103 @@ class Pace:
         return self.wall0
 
 
+@dataclass(frozen=True)
+class Supervision:
+    """How the loop restarts a source whose iterator raised (module docstring)."""
+
+    #: deaths in a row after which the run ends with an error (the daemon exits non-zero)
+    max_restarts: int = 5
+    backoff_s: float = 0.1  #: a live source's first restart waits this long, s
+    max_backoff_s: float = 2.0  #: ... and every further one twice as long, up to this, s
+    #: a live source that ran this long since its last restart starts the count again, s
+    healthy_s: float = 10.0
+
+    def __post_init__(self) -> None:
+        if self.max_restarts < 0:
+            raise ValueError(f"max_restarts {self.max_restarts}: must be >= 0")
+        if not (0 <= self.backoff_s <= self.max_backoff_s):
+            raise ValueError(
+                f"backoff_s {self.backoff_s} s must be in [0, max_backoff_s = "
+                f"{self.max_backoff_s} s]"
+            )
+
+
+class SourceFailed(OperationError):
+    """A source kept failing (`Supervision.max_restarts`); ``summary``: the run up to it,
+    with the sinks closed."""
+
+    def __init__(self, message: str, summary: RunSummary | None = None) -> None:
+        super().__init__(message)
+        self.summary = summary
+
+
+class _Supervisor:
+    """Reads each source through `samples`, restarting it when its iterator raises
+    (module docstring); thread-safe counts per source name."""
+
+    def __init__(self, policy: Supervision, stop: threading.Event) -> None:
+        self.policy = policy
+        self.stop = stop
+        self.deaths: Counter[str] = Counter()  #: exceptions out of each source's iterator
+        self.restarts: Counter[str] = Counter()  #: times each source was iterated again
+        self.failed = ""  #: why the run must end ('' while every source is fine)
+        self._lock = threading.Lock()
+
+    def samples(self, source: Source) -> Iterator[Sample]:
+        """The samples of ``source``, restarted after an exception; raises `SourceFailed`
+        when it dies `Supervision.max_restarts` times in a row."""
+        policy = self.policy
+        in_row = 0  # deaths since the source last made progress
+        last_t = -math.inf  # the newest sample given (a file source resumes after it)
+        while True:
+            started = time.monotonic()
+            progressed = False
+            try:
+                for sample in source:
+                    if not source.live and sample.t_s <= last_t:
+                        continue  # a file source read again from its start: resume
+                    last_t = max(last_t, sample.t_s)
+                    progressed = True
+                    yield sample
+                return
+            except Exception as exc:
+                error = f"{type(exc).__name__}: {exc}".splitlines()[0]
+                healthy = time.monotonic() - started >= policy.healthy_s
+                if progressed and (healthy or not source.live):
+                    in_row = 0
+                in_row += 1
+                with self._lock:
+                    self.deaths[source.name] += 1
+                log.error(
+                    "event=thread_died source=%s error=%r deaths=%d in_row=%d",
+                    source.name,
+                    error,
+                    self.deaths[source.name],
+                    in_row,
+                )
+                log.debug("source %s: the exception", source.name, exc_info=True)
+                if in_row > policy.max_restarts:
+                    message = (
+                        f"{source.name}: the source failed {in_row} times in a row "
+                        f"(last: {error}); giving up"
+                    )
+                    log.error("event=source_gave_up source=%s error=%r", source.name, error)
+                    with self._lock:
+                        self.failed = self.failed or message
+                    raise SourceFailed(message) from exc
+            if source.live:
+                wait = min(policy.backoff_s * 2 ** (in_row - 1), policy.max_backoff_s)
+                if self.stop.wait(wait):
+                    return
+            with self._lock:
+                self.restarts[source.name] += 1
+            log.warning(
+                "event=source_restarted source=%s restarts=%d",
+                source.name,
+                self.restarts[source.name],
+            )
+
+
 class _End:
     """A source thread's end marker."""
 
@@ -146,14 +262,18 @@ class _LiveMerge:
         latency_s: float,
         stop: threading.Event,
         queue_size: int,
+        supervisor: _Supervisor,
     ) -> None:
         self.sources = sources
+        self.supervisor = supervisor
         self.pace = pace
         self.latency_s = latency_s
         self.stop = stop
         self.queue: queue.Queue[Sample | _End] = queue.Queue(maxsize=queue_size)
         self.queue_drops = 0  #: samples lost because the queue was full
         self.frames_dropped = 0  #: frames skipped because a newer one was due
+        #: called with the released samples' clock after each batch (the status cycle)
+        self.on_tick: Callable[[float], None] | None = None
         self._threads = [
             threading.Thread(target=self._pump, args=(s,), name=f"source:{s.name}", daemon=True)
             for s in sources
@@ -177,7 +297,7 @@ class _LiveMerge:
 
     def _pump(self, source: Source) -> None:
         try:
-            for sample in source:
+            for sample in self.supervisor.samples(source):
                 if self.stop.is_set():
                     return
                 if self.pace is not None and not source.live:
@@ -186,8 +306,11 @@ class _LiveMerge:
                     if wait > 0 and self.stop.wait(wait):
                         return
                 self._put(sample)
-        except Exception:  # a source thread must not die silently
-            log.exception("event=source_failed source=%s", source.name)
+        except SourceFailed:
+            pass  # logged; the merge ends the run (`samples`)
+        except Exception:  # the supervisor's own failure: never silent
+            log.exception("event=thread_died source=%s", source.name)
+            self.supervisor.failed = self.supervisor.failed or f"{source.name}: thread died"
         finally:
             self._put(_End(source))
 
@@ -206,6 +329,8 @@ class _LiveMerge:
         files_open = sum(not s.live for s in self.sources)
         ends_by_itself = files_open > 0 and not keep_running
         while not self.stop.is_set():
+            if self.supervisor.failed:
+                raise SourceFailed(self.supervisor.failed)
             try:  # take what arrived, waiting at most poll_s for the first item
                 item: Sample | _End | None = self.queue.get(timeout=poll_s)
             except queue.Empty:
@@ -233,9 +358,11 @@ class _LiveMerge:
             yield from ((s, False) for i, s in enumerate(ready) if i not in skip)
             if ended:
                 return
-            if not ready:
-                for wd in watchdogs:  # on the released samples' clock
-                    yield from ((s, True) for s in wd.check(horizon))
+            # also while CAN samples keep coming: a silent camera is noticed on time
+            for wd in watchdogs:  # on the released samples' clock
+                yield from ((s, True) for s in wd.check(horizon))
+            if self.on_tick is not None:
+                self.on_tick(horizon)
 
     def close(self) -> None:
         for s in self.sources:
@@ -261,11 +388,14 @@ def run(
     max_frames: int | None = None,
     progress: Callable[[int, float], None] | None = None,
     keep_running: bool = False,
+    supervision: Supervision | None = None,
 ) -> RunSummary:
-    """Run the pipeline over the sources into the sinks (module docstring)."""
+    """Run the pipeline over the sources into the sinks (module docstring). Raises
+    `SourceFailed` (after closing the sinks) when a source keeps failing."""
     stop = stop or threading.Event()
     summary = RunSummary()
-    state = _LoopState(pipeline, sinks, summary, status_period_s, sources)
+    supervisor = _Supervisor(supervision or Supervision(), stop)
+    state = _LoopState(pipeline, sinks, summary, status_period_s, sources, supervisor.deaths)
     wall0 = time.perf_counter()
     live = pace is not None or any(s.live for s in sources)
     merge: _LiveMerge | None = None
@@ -273,11 +403,18 @@ def run(
         stream: Iterator[tuple[Sample, bool]]
         if live:
             merge = _LiveMerge(
-                sources, pace=pace, latency_s=latency_s, stop=stop, queue_size=queue_size
+                sources,
+                pace=pace,
+                latency_s=latency_s,
+                stop=stop,
+                queue_size=queue_size,
+                supervisor=supervisor,
             )
+            merge.on_tick = state.tick
             stream = merge.samples(watchdogs, poll_s=poll_s, keep_running=keep_running)
         else:
-            stream = ((sample, False) for sample in merge_sources(sources))
+            supervised = [supervisor.samples(s) for s in sources]
+            stream = ((sample, False) for sample in merge_sources(supervised))
         cut = False  # stopped by max_frames
         for sample, injected in stream:
             if stop.is_set():
@@ -292,6 +429,11 @@ def run(
     except KeyboardInterrupt:  # Ctrl-C without a handler: stop like a signal does
         summary.interrupted = True
         log.warning("event=interrupted frames=%d", summary.frames)
+    except SourceFailed as exc:
+        summary.interrupted = True
+        summary.error = str(exc)
+        exc.summary = summary
+        raise
     except BaseException as exc:
         summary.interrupted = True
         summary.error = f"{type(exc).__name__}: {exc}"
@@ -307,6 +449,10 @@ def run(
         finally:
             summary.seconds = time.perf_counter() - wall0
             summary.source_errors = {s.name: s.errors for s in sources}
+            summary.thread_deaths = dict(supervisor.deaths)
+            summary.source_problems = {
+                s.name: source_problems(s, supervisor.deaths, supervisor.restarts) for s in sources
+            }
             for sink in sinks:
                 try:
                     sink.close(summary)
@@ -314,6 +460,31 @@ def run(
                     summary.sink_errors += 1
                     log.exception("event=sink_close_failed sink=%s", type(sink).__name__)
     return summary
+
+
+def source_problems(
+    source: Source,
+    deaths: Mapping[str, int] | None = None,
+    restarts: Mapping[str, int] | None = None,
+) -> dict[str, int]:
+    """What went wrong with ``source``: reason -> count, from the ``problems`` counters of
+    the source, of the source it wraps (``source``: a window) and of its decoder
+    (``decoder``), each counted once, plus the loop's ``thread_died`` / ``restarted``."""
+    merged: Counter[str] = Counter()
+    seen: set[int] = set()
+    for owner in (source, getattr(source, "source", None)):
+        for holder in (owner, getattr(owner, "decoder", None)):
+            problems = getattr(holder, "problems", None)
+            if not isinstance(problems, Mapping) or id(problems) in seen:
+                continue
+            seen.add(id(problems))
+            for reason, n in problems.items():
+                if isinstance(n, int) and n:
+                    merged[str(reason)] += n
+    for reason, counts in (("thread_died", deaths), ("restarted", restarts)):
+        if counts and counts.get(source.name):
+            merged[reason] += counts[source.name]
+    return dict(sorted(merged.items()))
 
 
 class _LoopState:
@@ -326,8 +497,10 @@ class _LoopState:
         summary: RunSummary,
         status_period_s: float,
         sources: Sequence[Source],
+        deaths: Mapping[str, int],
     ) -> None:
         self.pipeline = pipeline
+        self.deaths = deaths  #: the supervisor's (a source's death counts as an input error)
         self.sinks = sinks
         self.summary = summary
         self.period = status_period_s
@@ -339,7 +512,8 @@ class _LoopState:
         self.gyro_state = ""  #: the gyro's state at the last entry of ``mode_changes``
 
     def _status(self) -> Status:
-        self.pipeline.input_errors = sum(s.errors for s in self.sources)
+        # on CAN (StatusInputErrors): the samples lost and the sources' deaths
+        self.pipeline.input_errors = sum(s.errors for s in self.sources) + sum(self.deaths.values())
         return replace(self.pipeline.status(), frames_processed=self.summary.frames)
 
     def _each_sink(self, call: Callable[[Sink], None]) -> None:
@@ -407,6 +581,16 @@ class _LoopState:
         if not injected:
             summary.frame_ms.add((time.perf_counter() - c0) * 1e3)
 
+    def tick(self, t: float) -> None:
+        """No sample is due up to ``t``: the status, if its period has passed since the last
+        one (after the first frame: before it there is nothing to report)."""
+        if self.summary.last is None or not math.isfinite(t) or t < self.next_status:
+            return
+        t = max(t, self.last_t)
+        status = self._status()
+        self._each_sink(lambda s: s.on_status(t, status))
+        self.next_status = t + self.period
+
     def finish(self) -> None:
         """The end of input: the held-back events as alerts, to every sink."""
         tail = self.pipeline.finish()
@@ -453,8 +637,11 @@ __all__ = [
     "Pace",
     "RunSummary",
     "SignalHandlers",
+    "SourceFailed",
     "Stage",
+    "Supervision",
     "Watchdog",
     "install_signal_handlers",
     "run",
+    "source_problems",
 ]

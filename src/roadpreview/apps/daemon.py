@@ -13,6 +13,13 @@ pipeline, alerts and the periodic status out on CAN. A composition of the run lo
   every status period, a vision failure for the fusion, so the status keeps going out)
   and the IMU (no gyro sample for ``can.imu_timeout_s``: logged and counted; the
   fusion's own gyro timeout turns the mode to VISUAL_ONLY);
+* supervision: the loop reads the camera and the bus in threads of their own and restarts
+  a source whose iterator raises (logged ``event=thread_died``, counted, with backoff;
+  `roadpreview.loop.Supervision`); a source that keeps failing ends the run with
+  `SourceFailed`, which `Daemon.run` raises after cleaning up, so ``roadpreview run``
+  exits non-zero and systemd's ``Restart=on-failure`` starts it again. A send error on
+  the output bus costs that frame only (`CanBusSink`); the status goes out on the loop's
+  schedule, so the next period's RP_STATUS is sent;
 * signals: SIGINT/SIGTERM set `Daemon.stop_event` (`install_signal_handlers`);
 * operations: a status line every ``daemon.status_log_period_s`` (`StatusMonitor`) and
   systemd ``Type=notify`` (`SystemdNotifier`): READY at the first frame, WATCHDOG pings
@@ -51,7 +58,15 @@ from roadpreview.apps.monitoring import (
 from roadpreview.camera import CameraModel
 from roadpreview.canbus.live import CanLogPlayer, open_bus
 from roadpreview.errors import ConfigError, InputDataError, OperationError
-from roadpreview.loop import FrameTimes, Pace, RunSummary, install_signal_handlers, run
+from roadpreview.loop import (
+    FrameTimes,
+    Pace,
+    RunSummary,
+    SourceFailed,
+    Supervision,
+    install_signal_handlers,
+    run,
+)
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.pipeline import Pipeline
 from roadpreview.sinks import Sink
@@ -102,6 +117,8 @@ class DaemonOptions:
     #: a file camera (and its CAN log): play at this multiple of the recorded speed; the
     #: time stamps stay on the recording's clock (``pace`` overrides it)
     rate: float = 1.0
+    #: how a failing camera or bus reader is restarted before the daemon gives up
+    supervision: Supervision = field(default_factory=Supervision)
 
 
 @dataclass
@@ -125,6 +142,13 @@ class DaemonSummary:
     can_log_errors: int = 0  #: its garbled, out-of-order and refused frames
     status_lines: int = 0  #: periodic status lines logged
     watchdog_withheld: int = 0  #: times the systemd watchdog pings were withheld (unhealthy)
+    #: exceptions out of a source's reader thread (the loop restarted it), per source
+    thread_deaths: dict[str, int] = field(default_factory=dict)
+    #: per source: reason -> count (`RunSummary.source_problems`)
+    source_problems: dict[str, dict[str, int]] = field(default_factory=dict)
+    #: per arbitration id: output frames the bus refused (e.g. ``{0x201: 1}``: RP_STATUS)
+    send_failures: dict[int, int] = field(default_factory=dict)
+    error: str = ""  #: why the daemon gave up ('' if it stopped normally)
     mode_changes: list[tuple[float, FusionMode, str]] = field(default_factory=list)
     seconds: float = 0.0
     interrupted: bool = False
@@ -149,6 +173,7 @@ class DaemonSummary:
             "can_receive_errors": self.can_receive_errors,
             "can_log_sent": self.can_log_sent,
             "can_log_errors": self.can_log_errors,
+            "thread_deaths": sum(self.thread_deaths.values()),
             "frame_ms_median": round(self.frame_ms.quantile(0.5), 2),
             "frame_ms_p99": round(self.frame_ms.quantile(0.99), 2),
             "frame_ms_max": round(self.frame_ms.max, 2),
@@ -363,7 +388,12 @@ class Daemon:
                 status_period_s=cfg.can.status_period_s,
                 latency_s=d.can_latency_s,
                 keep_running=not (self.options.stop_at_end and not self.camera.live),
+                supervision=self.options.supervision,
             )
+        except SourceFailed as exc:  # a source kept failing: summarised, then raised
+            result = exc.summary
+            self.summary.error = str(exc)
+            raise
         finally:
             notifier.notify("STOPPING=1")
             supervisor_done.set()
@@ -437,6 +467,8 @@ class Daemon:
             s.interrupted = r.interrupted
             s.frame_ms = r.frame_ms
             s.can_queue_drops = r.queue_drops
+            s.thread_deaths = dict(r.thread_deaths)
+            s.source_problems = {name: dict(p) for name, p in r.source_problems.items()}
         s.camera_read_failures = self.camera.errors
         s.status_lines = self.monitor.lines if self.monitor is not None else 0
         if self.player is not None:
@@ -446,6 +478,7 @@ class Daemon:
         s.camera_gap_frames = self.camera_watchdog.gap_frames
         s.imu_timeouts = self.imu_watchdog.timeouts
         s.alert_send_errors = self.output.send_errors
+        s.send_failures = dict(self.output.send_failures)
         s.can_frames = self.can_in.frames
         s.can_input_errors = self.can_in.decoder.stats.skipped
         s.can_queue_drops += self.can_in.dropped
@@ -478,6 +511,9 @@ def iter_summary_lines(summary: DaemonSummary) -> Iterator[str]:
         f"watchdogs: camera {s.camera_timeouts} timeout(s) ({s.camera_gap_frames} image-less "
         f"frames), IMU {s.imu_timeouts} timeout(s); {s.seconds:.1f} s"
     )
+    if s.thread_deaths:
+        deaths = ", ".join(f"{name} {n}" for name, n in s.thread_deaths.items())
+        yield f"reader threads died and were restarted: {deaths}"
     if s.can_log_sent or s.can_log_errors:
         yield f"CAN log player: {s.can_log_sent} frames sent, {s.can_log_errors} errors"
     yield (

@@ -7,6 +7,13 @@ RP_CONFIRM, RP_STATUS, RP_ROAD_STATUS), ``alerts.jsonl``, ``frames.csv``,
 ``plots.png``, ``summary.json`` and optionally ``annotated.mp4``. The sinks stream, so
 an interrupt (``stop``, set by SIGINT/SIGTERM in the CLI) keeps every alert emitted so
 far; the summary then says ``"interrupted": true``.
+
+An input that gives nothing (a CAN log without a frame, or none of whose frames maps to
+an IMU or speed sample; an IMU CSV without a valid row) does not stop the replay: the
+drive runs without it, a one-line error names it, and ``ReplayResult.unusable_inputs``
+and summary.json's ``unusable_inputs`` say so (``roadpreview replay`` then exits 1
+unless ``--allow-missing``). A source that keeps failing (`SourceFailed`) ends the run;
+the outputs and the summary are written up to it, then the error is raised.
 """
 
 from __future__ import annotations
@@ -15,16 +22,17 @@ import logging
 import math
 import threading
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from roadpreview.apps.progress import Progress
 from roadpreview.apps.summary import write_summary
 from roadpreview.camera import CameraModel
+from roadpreview.canbus.imu_csv import read_imu_csv
 from roadpreview.canbus.mapping import load_mapping
 from roadpreview.errors import ConfigError, InputDataError
-from roadpreview.loop import Pace, RunSummary, run
+from roadpreview.loop import Pace, RunSummary, SourceFailed, run
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.pipeline import FrameResult, Pipeline
 from roadpreview.pipeline.truthmatch import MatchReport, match_alerts
@@ -212,6 +220,8 @@ class ReplayResult:
     results: list[FrameResult] | None = None
     video_name: str = ""  #: the video source's name (its errors are decode failures)
     clock_notes: list[str] = field(default_factory=list)  #: how the inputs were put on one clock
+    #: inputs that gave nothing: ``{"path": ..., "reason": ...}`` (`replay`)
+    unusable_inputs: list[dict[str, str]] = field(default_factory=list)
 
     @property
     def frames(self) -> int:
@@ -292,6 +302,7 @@ def replay(
     from the video's frame 0 (`WindowedSource`). ``progress``: called with (frames, wall
     seconds) as the run goes; a `Progress` is also told the number of frames to expect."""
     config = config or PipelineConfig()
+    inputs, unusable = _usable_inputs(inputs)
     video, sources = inputs.sources(config)
     start = video.start_s
     if start_s is not None or end_s is not None:
@@ -331,6 +342,7 @@ def replay(
             sinks.append(AnnotatedVideoSink(out_dir / "annotated.mp4", video.fps, video.size))
     if isinstance(progress, Progress):
         progress.start(expected_frames(video, start_s, end_s, max_frames))
+    failure: SourceFailed | None = None
     try:
         summary = run(
             sources,
@@ -342,13 +354,23 @@ def replay(
             max_frames=max_frames,
             progress=progress,
         )
+    except SourceFailed as exc:  # the outputs up to it are closed: summarise them too
+        if isinstance(progress, Progress):
+            progress.close()
+        if exc.summary is None:
+            raise
+        summary, failure = exc.summary, exc
     except BaseException:
         if isinstance(progress, Progress):
             progress.close()
         raise
-    if isinstance(progress, Progress):
+    if isinstance(progress, Progress) and failure is None:
         progress.close(summary.frames)
+    if not summary.interrupted:
+        unusable += _unmapped_logs(sources)
     if summary.frames == 0:
+        if failure is not None:
+            raise failure
         window = "" if start_s is None and end_s is None else " in the --start/--end window"
         raise InputDataError(f"{inputs.video}: no frame could be read{window}")
     match = None
@@ -367,11 +389,58 @@ def replay(
         results=collected.results if collected is not None else None,
         video_name=video.name,
         clock_notes=list(inputs.clock_notes),
+        unusable_inputs=unusable,
     )
     if out_dir is not None:
-        files = [*input_files(inputs, sources), *more_inputs]
+        dropped = [Path(u["path"]) for u in unusable if Path(u["path"]).is_file()]
+        files = [*input_files(inputs, sources), *dropped, *more_inputs]
         write_summary(out_dir / "summary.json", result, config, files=files)
+    if failure is not None:
+        raise failure
     return result
+
+
+def _usable_inputs(inputs: ReplayInputs) -> tuple[ReplayInputs, list[dict[str, str]]]:
+    """``inputs`` without the CAN logs that hold no frame and the IMU CSV without a valid
+    row (each logged as an error), and what was left out: ``{"path", "reason"}``. A file
+    that does not exist is left in (the sources say so, and the replay stops)."""
+    unusable: list[dict[str, str]] = []
+    logs = []
+    for path in inputs.can_logs:
+        try:
+            if Path(path).is_file():
+                first_timestamp(path)
+        except InputDataError as exc:
+            unusable.append({"path": str(path), "reason": str(exc)})
+            log.error("%s; the drive is replayed without it", exc)
+            continue
+        logs.append(path)
+    imu_csv = inputs.imu_csv
+    if imu_csv is not None and Path(imu_csv).is_file():
+        try:
+            read_imu_csv(imu_csv)
+        except InputDataError as exc:
+            unusable.append({"path": str(imu_csv), "reason": str(exc)})
+            log.error("%s; the drive is replayed without it", exc)
+            imu_csv = None
+    if not unusable:
+        return inputs, []
+    return replace(inputs, can_logs=logs, imu_csv=imu_csv), unusable
+
+
+def _unmapped_logs(sources: Sequence[Source]) -> list[dict[str, str]]:
+    """The CAN logs read to their end of which no frame gave an IMU or speed sample."""
+    out = []
+    for s in sources:
+        inner = getattr(s, "source", s)  # a WindowedSource's
+        if isinstance(inner, CanLogSource) and inner.samples == 0:
+            why = (
+                f"{inner.path}: none of its {inner.frames} frames maps to an IMU or speed "
+                f"sample (DBC {inner.decoder.db_name}, mapping {inner.decoder.mapping.source})"
+            )
+            log.error("%s; the drive ran without it", why)
+            out.append({"path": str(inner.path), "reason": why})
+    return out
 
 
 def _in_window(event: dict[str, Any], start: float, summary: RunSummary) -> bool:

@@ -9,6 +9,11 @@ that explains itself.
 * counts, the fusion modes (their changes with a reason, and each mode's share of
   the drive), the road class, the confirmations, and with ``--truth`` one row per true
   event (hit or miss, the alert that matched it and its timing errors).
+* what went wrong with the inputs: ``source_errors`` (samples lost, per source),
+  ``inputs_problems`` (per source: reason -> count, e.g. ``skipped_bad_line``,
+  ``rejected_range``, ``resynced``, ``missing_frames``, ``thread_died``, ``restarted``),
+  ``unusable_inputs`` (inputs that gave nothing, with the reason; the replay ran without
+  them) and ``thread_deaths``.
 
 The file is replaced atomically, so a reader never sees half of it.
 """
@@ -154,6 +159,10 @@ def summary_dict(
         "can_input_errors": result.input_errors,
         "frames_out_of_order": s.frames_out_of_order,
         "sink_errors": s.sink_errors,
+        "source_errors": dict(s.source_errors),
+        "inputs_problems": {name: dict(p) for name, p in s.source_problems.items()},
+        "unusable_inputs": list(result.unusable_inputs),
+        "thread_deaths": dict(s.thread_deaths),
         "mode_changes": [
             {"t_rel_s": round(t - start, 3), "mode": m.name, "reason": why}
             for t, m, why in s.mode_changes

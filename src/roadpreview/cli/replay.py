@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import threading
 from pathlib import Path
 from typing import Any
@@ -71,6 +72,13 @@ def add_subparser(sub: Any) -> None:
         " row per event to summary.json",
     )
     p.add_argument("--annotate", action="store_true", help="also write annotated.mp4")
+    p.add_argument(
+        "--allow-missing",
+        action="store_true",
+        help="exit 0 even when an input gave nothing (a CAN log without a frame or without"
+        " a frame the DBC/mapping maps, an IMU CSV without a valid row); the drive is"
+        " replayed without it either way and summary.json lists it under unusable_inputs",
+    )
     p.set_defaults(func=_run)
 
 
@@ -121,4 +129,15 @@ def _run(args: argparse.Namespace) -> int:
     if result.interrupted:
         print("interrupted: the outputs hold everything up to the last frame processed")
         return 130
+    for bad in result.unusable_inputs:
+        allowed = (
+            "allowed by --allow-missing" if args.allow_missing else "--allow-missing to accept"
+        )
+        print(
+            f"roadpreview replay: {'warning' if args.allow_missing else 'error'}: unusable input "
+            f"{bad['reason']} (the drive ran without it; {allowed})",
+            file=sys.stderr,
+        )
+    if result.unusable_inputs and not args.allow_missing:
+        return 1
     return 0

@@ -45,7 +45,9 @@ def add_subparser(sub: Any) -> None:
         type=float,
         default=None,
         metavar="S",
-        help="override the drive's duration, seconds; default: the preset's",
+        help="override the drive's duration, seconds (the road is lengthened to fit it;"
+        " random anomalies spread over it, a preset's placed ones stay); default: the"
+        " preset's",
     )
     p.add_argument(
         "--resolution",
@@ -161,14 +163,9 @@ def _run(args: argparse.Namespace) -> int:
         if args.seed is not None:
             cfg = replace(cfg, seed=args.seed)
     else:
-        cfg = drive_config(
-            args.preset,
-            args.seed or 0,
-            duration_s=args.duration,
-            width=width,
-            height=height,
-            fps=args.fps,
-        )
+        cfg = drive_config(args.preset, args.seed or 0, width=width, height=height, fps=args.fps)
+    if args.duration is not None:
+        cfg = cfg.with_duration(args.duration)  # the road sized for it
     if args.can:
         cfg = replace(cfg, output=replace(cfg.output, can_formats=args.can.split(",")))
     if args.masks:

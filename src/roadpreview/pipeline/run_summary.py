@@ -63,6 +63,12 @@ class RunSummary:
     sink_errors: int = 0
     queue_drops: int = 0  #: samples lost because the live merge's queue was full
     source_errors: dict[str, int] = field(default_factory=dict)  #: samples lost, per source
+    #: per source: reason -> count (``skipped_bad_line``, ``rejected_range``, ``resynced``,
+    #: ``thread_died``, ...: the ``problems`` the source and its decoder expose, and the
+    #: loop's restarts; `roadpreview.loop.source_problems`)
+    source_problems: dict[str, dict[str, int]] = field(default_factory=dict)
+    #: per source: exceptions out of its iterator (the loop restarted it, or gave up)
+    thread_deaths: dict[str, int] = field(default_factory=dict)
     frame_ms: FrameTimes = field(default_factory=FrameTimes)  #: processing time per frame
     last: FrameResult | None = None  #: the last frame's result
 

@@ -10,7 +10,7 @@ from TOML with unknown keys rejected and every error naming the field.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +21,7 @@ from roadpreview.camera import CameraModel
 from roadpreview.configtools import param
 from roadpreview.errors import ConfigError
 from roadpreview.sim.imu import IMU_PRESETS, ImuConfig, SpeedSensorConfig
-from roadpreview.sim.motion import MotionConfig
+from roadpreview.sim.motion import MotionConfig, _kinematics
 from roadpreview.sim.render import RenderConfig
 from roadpreview.sim.scene import SceneConfig
 
@@ -108,6 +108,12 @@ class OutputSpec:
             raise ConfigError(f"{where}.video_fourcc = {self.video_fourcc!r}: four characters")
 
 
+#: road beyond the lead's last position: what the camera sees ahead of it (as the presets)
+ROAD_MARGIN_M = 120.0
+#: the longest road `RoadConfig` accepts (``road.length_m``), m
+MAX_ROAD_M = 100_000.0
+
+
 @dataclass(frozen=True)
 class ScenarioConfig:
     """Everything that defines a simulated recording, with its seed."""
@@ -152,6 +158,38 @@ class ScenarioConfig:
                 )
 
     # -- derived ------------------------------------------------------------------
+    def with_duration(self, duration_s: float) -> ScenarioConfig:
+        """This scenario for ``duration_s`` seconds: condition segments that begin after the
+        end dropped, and the road lengthened (never shortened) so that the lead stays on
+        it to the end (`road_for_drive`). Random anomalies (``anomaly_density_per_km``)
+        spread over the longer road; explicit ones stay where they are."""
+        cfg = replace(
+            self,
+            motion=replace(self.motion, duration_s=duration_s),
+            conditions=[c for c in self.conditions if c.start_s < duration_s],
+        )
+        return cfg.road_for_drive()
+
+    def road_for_drive(self) -> ScenarioConfig:
+        """This scenario with a road at least `ROAD_MARGIN_M` beyond the point the lead's
+        front wheels reach at the end of the drive (its speed plan, gap plan and
+        manoeuvres); itself when the road is long enough. ConfigError for a drive that
+        is infeasible for another reason, or longer than the longest road."""
+        m = self.motion
+        probe = replace(m, road=replace(m.road, length_m=math.inf))
+        kin = _kinematics(probe, "motion")
+        reach = float(kin.x_lead[-1]) + m.lead.cg_to_front_axle_m + m.lead.wheel_radius_m
+        needed = math.ceil(reach + ROAD_MARGIN_M)
+        if needed <= m.road.length_m:
+            return self
+        if needed > MAX_ROAD_M:
+            raise ConfigError(
+                f"motion.duration_s = {m.duration_s} s: the lead would drive to X = "
+                f"{reach:.0f} m, beyond the longest road ({MAX_ROAD_M:.0f} m); shorten the drive"
+            )
+        road = replace(m.road, length_m=float(needed))
+        return replace(self, motion=replace(m, road=road))
+
     @property
     def imu_config(self) -> ImuConfig:
         """The IMU's configuration (preset or custom)."""

@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import math
 from abc import ABC, abstractmethod
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -164,12 +165,20 @@ class CanLogSink(CanSink):
             self.writer.close()
 
 
+#: send errors logged one by one; after them one line every `SEND_ERROR_LOG_EVERY`
+SEND_ERRORS_LOGGED = 5
+SEND_ERROR_LOG_EVERY = 1000
+
+
 class CanBusSink(CanSink):
     """The output frames sent on a bus (stamped with the pipeline's time, which is the
-    wall clock in the daemon; the receiver stamps them again); a send error is logged and
-    counted, never raised (the daemon goes on). ``record`` also writes every frame sent
-    to a CAN log. At close the active alerts end (CANCELLED, STOPPED) and the last status
-    (after the flush) is sent once more."""
+    wall clock in the daemon; the receiver stamps them again). A send that fails, with
+    whatever exception, costs that frame only: it is counted (``send_errors``, and per
+    arbitration id in ``send_failures``), logged (the first `SEND_ERRORS_LOGGED`, then
+    every `SEND_ERROR_LOG_EVERY`-th, and once when a send succeeds again) and never
+    raised: the next frame, e.g. the next period's RP_STATUS, is sent as usual.
+    ``record`` also writes every frame sent to a CAN log. At close the active alerts end
+    (CANCELLED, STOPPED) and the last status (after the flush) is sent once more."""
 
     def __init__(
         self,
@@ -182,21 +191,35 @@ class CanBusSink(CanSink):
         super().__init__(detector=detector, repetition=repetition)
         self.bus = bus
         self.send_errors = 0  #: frames the bus refused
+        self.send_failures: Counter[int] = Counter()  #: ... per arbitration id
+        self._failing = 0  # send errors since the last frame that went out
         self.record = CanLogWriter(record) if record is not None else None
         self._last: tuple[float, Status] | None = None  # the newest time and status seen
 
     def _emit(self, msg: can.Message) -> bool:
         try:
             self.bus.send(msg)
-        except can.CanError as exc:
+        except Exception as exc:  # a bus error, a closed socket, a driver bug: one frame
             self.send_errors += 1
-            log.error(
-                "event=can_send_failed id=0x%X errors=%d error=%r",
-                msg.arbitration_id,
-                self.send_errors,
-                str(exc),
-            )
+            self.send_failures[msg.arbitration_id] += 1
+            self._failing += 1
+            n = self.send_errors
+            if n <= SEND_ERRORS_LOGGED or n % SEND_ERROR_LOG_EVERY == 0:
+                log.error(
+                    "event=can_send_failed id=0x%X errors=%d error=%r",
+                    msg.arbitration_id,
+                    n,
+                    f"{type(exc).__name__}: {exc}",
+                )
             return False
+        if self._failing:
+            log.warning(
+                "event=can_send_recovered id=0x%X failed_in_row=%d errors=%d",
+                msg.arbitration_id,
+                self._failing,
+                self.send_errors,
+            )
+            self._failing = 0
         if self.record is not None:
             self.record.write(msg)
         return True
