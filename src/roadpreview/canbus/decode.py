@@ -344,6 +344,10 @@ class CanInputDecoder:
         reason = self._check_integrity(plan, msg, data)
         if reason:
             return self._problem(FrameProblem.INTEGRITY, msg, f"{message.name}: {reason}")
+        rejected = self._jump_problem(plan, message.name, msg, t)
+        if rejected is not None:
+            return rejected
+        plan.last_t = t  # intact (CRC): its stamp is the time line's, also if stuck below
         counter = None
         gap = 0
         if plan.e2e is not None:
@@ -362,12 +366,8 @@ class CanInputDecoder:
                         f"{message.name}: counter {plan.last_counter} -> {counter}, more than"
                         f" {self.plausibility.e2e_max_delta_counter}; re-synced",
                     )
-        rejected = self._jump_problem(plan, message.name, msg, t)
-        if rejected is not None:
-            return rejected
-        # the frame came through intact and in order: its counter and stamp are the new
-        # reference, whatever the values turn out to be
-        plan.last_t = t
+        # the frame came through intact and in order: its counter is the new reference,
+        # whatever the values turn out to be
         if counter is not None:
             plan.last_counter = counter
         st.lost += gap
@@ -416,9 +416,7 @@ class CanInputDecoder:
             why = self.gate.check(taken)
             if why:
                 kind = FrameProblem.SPIKE if why == REJECTED_SPIKE else FrameProblem.OUT_OF_RANGE
-                return self._problem(
-                    kind, msg, f"{message.name}: {self.gate.describe(taken, why)}"
-                )
+                return self._problem(kind, msg, f"{message.name}: {self.gate.describe(taken, why)}")
         st.used += 1
         st.not_available += not_available
         return out
