@@ -34,6 +34,7 @@ import queue
 import signal
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from types import FrameType
@@ -340,7 +341,14 @@ class _LoopState:
 
     def _status(self) -> Status:
         self.pipeline.input_errors = sum(s.errors for s in self.sources)
-        return replace(self.pipeline.status(), frames_processed=self.summary.frames)
+        problems: Counter[str] = Counter()
+        for s in self.sources:  # the per-source problems contract (RP_INPUT_STATUS)
+            problems.update(getattr(s, "problems", {}))
+        return replace(
+            self.pipeline.status(),
+            frames_processed=self.summary.frames,
+            input_problems_total=dict(problems),
+        )
 
     def _each_sink(self, call: Callable[[Sink], None]) -> None:
         for sink in self.sinks:

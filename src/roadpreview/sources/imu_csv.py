@@ -11,7 +11,7 @@ from pathlib import Path
 from roadpreview.canbus.imu_csv import imu_samples, read_imu_csv
 from roadpreview.canbus.samples import ImuMeasurements, ImuMount
 from roadpreview.errors import InputDataError
-from roadpreview.plausibility import SampleGate
+from roadpreview.plausibility import PlausibilityConfig, SampleGate
 from roadpreview.sources import shifted
 from roadpreview.types import InputSample
 
@@ -23,7 +23,12 @@ class ImuCsvSource:
     live = False
 
     def __init__(
-        self, path: str | Path, *, offset_s: float = 0.0, mount: ImuMount | None = None
+        self,
+        path: str | Path,
+        *,
+        offset_s: float = 0.0,
+        mount: ImuMount | None = None,
+        plausibility: PlausibilityConfig | None = None,
     ) -> None:
         self.path = Path(path)
         self.name = str(self.path)
@@ -33,7 +38,9 @@ class ImuCsvSource:
         self.mount = mount
         self._table: ImuMeasurements | None = None
         self._closed = False
-        self.gate = SampleGate()  #: the plausibility gate (ranges, gyro spikes) of the rows
+        self.gate = SampleGate(
+            plausibility
+        )  #: the plausibility gate (ranges, gyro spikes) of the rows
 
     @property
     def problems(self) -> Counter[str]:
