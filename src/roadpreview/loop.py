@@ -514,7 +514,14 @@ class _LoopState:
     def _status(self) -> Status:
         # on CAN (StatusInputErrors): the samples lost and the sources' deaths
         self.pipeline.input_errors = sum(s.errors for s in self.sources) + sum(self.deaths.values())
-        return replace(self.pipeline.status(), frames_processed=self.summary.frames)
+        problems: Counter[str] = Counter()
+        for s in self.sources:  # the per-source problems contract (RP_INPUT_STATUS)
+            problems.update(getattr(s, "problems", {}))
+        return replace(
+            self.pipeline.status(),
+            frames_processed=self.summary.frames,
+            input_problems_total=dict(problems),
+        )
 
     def _each_sink(self, call: Callable[[Sink], None]) -> None:
         for sink in self.sinks:

@@ -28,7 +28,8 @@ y left, z up; +9.81 m/s² on z at rest). A quantity a sample does not carry is N
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from enum import IntEnum, IntFlag
 from typing import TypeAlias
 
@@ -236,6 +237,11 @@ class Status:
     precision: float | None = None  #: running online precision of the checked alerts, 0..1
     confirmed: int = 0  #: alerts the ego confirmed since start
     not_felt: int = 0  #: alerts the ego did not feel since start
+    # --- carried by RP_INPUT_STATUS ---
+    #: input samples rejected or noted since start, by reason (the sources' ``problems``:
+    #: rejected_range, rejected_spike, saturated, e2e_crc, ...); the encoder sends the
+    #: increase since its last frame, grouped
+    input_problems_total: Mapping[str, int] = field(default_factory=dict)
 
 
 __all__ = [

@@ -21,6 +21,7 @@ from roadpreview.canbus.dbc import (
     RP_ALERT_DETAIL,
     RP_ALERT_END,
     RP_CONFIRM,
+    RP_INPUT_STATUS,
     RP_ROAD_STATUS,
     RP_STATUS,
     VEHICLE_SPEED,
@@ -122,6 +123,7 @@ def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> Non
         RP_ALERT_DETAIL: 0x203,
         RP_CONFIRM: 0x204,
         RP_ALERT_END: 0x205,
+        RP_INPUT_STATUS: 0x206,
     }
     assert {m.name: m.frame_id for m in db.messages} == inputs | outputs
     for m in db.messages:
@@ -150,7 +152,8 @@ def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> Non
     for cyclic in (RP_STATUS, RP_ROAD_STATUS):
         assert db.get_message_by_name(cyclic).cycle_time == 100
         assert db.get_message_by_name(cyclic).send_type == "Cyclic"
-    for repeated in (RP_ALERT, RP_ALERT_DETAIL):  # every 100 ms while an alert is active
+    # every 100 ms while an alert is active / the inputs have problems
+    for repeated in (RP_ALERT, RP_ALERT_DETAIL, RP_INPUT_STATUS):
         assert db.get_message_by_name(repeated).cycle_time == 100
         assert db.get_message_by_name(repeated).send_type == "IfActive"
     for event in (RP_CONFIRM, RP_ALERT_END):
@@ -168,6 +171,7 @@ def test_the_top_comment_lists_every_output_id() -> None:
         (RP_ALERT_DETAIL, 0x203),
         (RP_CONFIRM, 0x204),
         (RP_ALERT_END, 0x205),
+        (RP_INPUT_STATUS, 0x206),
     ):
         assert f"0x{fid:03X} {name}" in top, name
 

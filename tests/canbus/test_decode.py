@@ -182,7 +182,9 @@ def test_every_bad_frame_is_counted_logged_once_and_skipped(
         frame(0.00, 0),
         can.Message(timestamp=0.005, arbitration_id=0x555, data=b"\x00" * 8),  # unknown ID
         frame(0.01, 1),
-        can.Message(timestamp=0.015, arbitration_id=0x130, data=b"\x00" * 6),  # 6 bytes
+        can.Message(
+            timestamp=0.015, arbitration_id=0x130, data=b"\x00" * 6, is_extended_id=False
+        ),  # 6 bytes
         frame(0.02, 2),
         bad_crc,
         frame(0.04, 4),
@@ -193,7 +195,7 @@ def test_every_bad_frame_is_counted_logged_once_and_skipped(
         frame(0.07, 8),
         can.Message(timestamp=0.075, arbitration_id=0x130, is_error_frame=True),
         frame(0.08, 9),
-        frame(0.09, 12),  # two frames lost on the way: counted, not skipped
+        frame(0.09, 12),  # two frames lost on the way: a counter jump, counted, not skipped
         frame(0.10, 13, YawRate=120.0),  # a second out-of-range frame: counted, not logged
     ]
     dec = CanInputDecoder(db, mapping)
@@ -213,11 +215,16 @@ def test_every_bad_frame_is_counted_logged_once_and_skipped(
         FrameProblem.OUT_OF_RANGE: 2,
         FrameProblem.NOT_DATA_FRAME: 1,
     }
-    assert dec.stats.lost == 5  # counters 3 (CRC), 6 (time), 7 (range), 10 and 11 (never came)
+    # counters 3 (CRC), 6 (time) and 10, 11 (never came); 7 came intact with a value out of
+    # range: skipped, but its counter is the new reference
+    assert dec.stats.lost == 4
     assert dec.stats.frames == len(stream)
     assert dec.stats.used == len(samples)
     warnings = [r for r in caplog.records if r.name == "roadpreview.canbus.decode"]
-    assert len(warnings) == 7  # once per kind
+    assert len(warnings) == 8  # once per kind, and once for the counter jump 9 -> 12 (taken)
+    assert dec.notes == {"e2e_counter_jump": 1}
+    assert dec.problems["e2e_counter_jump"] == 1
+    assert dec.problems["rejected_range"] == 2
     text = caplog.text
     assert "0x555" in text
     assert "IMU_RATES.YawRate = 150" in text
@@ -239,7 +246,15 @@ def test_channel_filter_and_ignored_unknown_ids(db: Database) -> None:
     assert dec.decode(can.Message(timestamp=2, arbitration_id=0x7AB, data=payload, channel=0)) == []
     assert (
         len(
-            dec.decode(can.Message(timestamp=3, arbitration_id=0x130, data=payload, channel="can0"))
+            dec.decode(
+                can.Message(
+                    timestamp=3,
+                    arbitration_id=0x130,
+                    data=payload,
+                    channel="can0",
+                    is_extended_id=False,
+                )
+            )
         )
         == 1
     )

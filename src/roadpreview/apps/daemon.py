@@ -248,7 +248,7 @@ class Daemon:
                 self.output_bus = open_bus(
                     c.output_interface or c.input_interface, c.output_channel or c.input_channel
                 )
-            decoder = make_decoder(c.dbc, c.mapping)
+            decoder = make_decoder(c.dbc, c.mapping, self.config.plausibility)
             self.can_in = CanBusSource(self.input_bus, decoder, queue_size=d.can_queue_size)
             self.output = CanBusSink(
                 self.output_bus,

@@ -165,15 +165,16 @@ class ReplayInputs:
         logs: list[tuple[CanLogSource | ImuCsvSource, LogClock]] = []
         if self.can_logs:
             cfg = config or PipelineConfig()
-            decoder = make_decoder(cfg.can.dbc, cfg.can.mapping)
-            for path in self.can_logs:
+            for path in self.can_logs:  # a decoder per log: its own E2E state and counts
+                decoder = make_decoder(cfg.can.dbc, cfg.can.mapping, cfg.plausibility)
                 first = first_timestamp(path)
                 clock_of = LogClock(f"CAN log {path}", first, self.can_offset_s, "--can-offset")
                 logs.append((CanLogSource(path, decoder), clock_of))
         if self.imu_csv is not None:
             mapping = (config or PipelineConfig()).can.mapping  # a calibrated [mount], if any
             mount = load_mapping(mapping).mount if mapping else None
-            imu = ImuCsvSource(self.imu_csv, mount=mount)
+            gate = (config or PipelineConfig()).plausibility
+            imu = ImuCsvSource(self.imu_csv, mount=mount, plausibility=gate)
             clock_of = LogClock(
                 f"IMU CSV {self.imu_csv}", imu.first_s, self.imu_offset_s, "--imu-offset"
             )

@@ -46,6 +46,9 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
         RP_CONFIRM as RP_CONFIRM,
     )
     from roadpreview.canbus.dbc import (
+        RP_INPUT_STATUS as RP_INPUT_STATUS,
+    )
+    from roadpreview.canbus.dbc import (
         RP_ROAD_STATUS as RP_ROAD_STATUS,
     )
     from roadpreview.canbus.dbc import (
@@ -169,6 +172,9 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
         ReceivedConfirm as ReceivedConfirm,
     )
     from roadpreview.canbus.output import (
+        ReceivedInputStatus as ReceivedInputStatus,
+    )
+    from roadpreview.canbus.output import (
         ReceivedOutput as ReceivedOutput,
     )
     from roadpreview.canbus.output import (
@@ -245,6 +251,7 @@ _EXPORTS = {
     "RP_ALERT_DETAIL": "roadpreview.canbus.dbc",
     "RP_ALERT_END": "roadpreview.canbus.dbc",
     "RP_CONFIRM": "roadpreview.canbus.dbc",
+    "RP_INPUT_STATUS": "roadpreview.canbus.dbc",
     "RP_ROAD_STATUS": "roadpreview.canbus.dbc",
     "RP_STATUS": "roadpreview.canbus.dbc",
     "ReceivedAlert": "roadpreview.canbus.output",
@@ -252,6 +259,7 @@ _EXPORTS = {
     "ReceivedAlertEnd": "roadpreview.canbus.output",
     "ReceivedConfirm": "roadpreview.canbus.output",
     "ReceivedOutput": "roadpreview.canbus.output",
+    "ReceivedInputStatus": "roadpreview.canbus.output",
     "ReceivedRoadStatus": "roadpreview.canbus.output",
     "ReceivedStatus": "roadpreview.canbus.output",
     "RepetitionConfig": "roadpreview.canbus.repetition",

@@ -6,9 +6,9 @@ cantools in strict mode. Every input message carries an AUTOSAR E2E profile 1
 header: byte 0 is a CRC-8 SAE J1850 over the message's E2E data ID (DBC
 attribute ``E2E_DataID``) and bytes 1..7, bits 8..11 an alive counter that
 runs 0..14; so do the outputs ``RP_ALERT``, ``RP_ALERT_DETAIL``, ``RP_ALERT_END``,
-``RP_CONFIRM``, ``RP_STATUS`` and ``RP_ROAD_STATUS`` (`roadpreview.canbus.output`). The CRC comes
-from the ``autosar-e2e`` package. Messages and signals are documented in
-``docs/can-interface.md``.
+``RP_CONFIRM``, ``RP_STATUS``, ``RP_ROAD_STATUS`` and ``RP_INPUT_STATUS``
+(`roadpreview.canbus.output`). The CRC comes from the ``autosar-e2e`` package.
+Messages and signals are documented in ``docs/can-interface.md``.
 
 Other cars' DBCs (opendbc) load with ``load_database(path, strict=False)``:
 they often have overlapping or placeholder signals that strict mode refuses.
@@ -41,6 +41,7 @@ WHEEL_SPEEDS = "WHEEL_SPEEDS"
 RP_ALERT = "RP_ALERT"
 RP_STATUS = "RP_STATUS"
 RP_ROAD_STATUS = "RP_ROAD_STATUS"
+RP_INPUT_STATUS = "RP_INPUT_STATUS"
 RP_ALERT_DETAIL = "RP_ALERT_DETAIL"
 RP_CONFIRM = "RP_CONFIRM"
 RP_ALERT_END = "RP_ALERT_END"

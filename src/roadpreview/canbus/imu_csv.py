@@ -11,7 +11,9 @@ The file starts with optional ``#`` comment lines, then the header
 +9.81 on z at rest). Bad rows are logged with file and line and skipped.
 `imu_samples` turns the table into the `ImuSample` stream the CAN decoder
 also produces, in roadpreview's conventions (through an `ImuMount` when the
-phone does not lie with its axes along the car's). ``roadpreview.sim.canlog``
+phone does not lie with its axes along the car's), through the same plausibility
+gate as the CAN decoder (`roadpreview.plausibility`: physical ranges, gyro
+spikes): an implausible row costs that row, is counted and logged once. ``roadpreview.sim.canlog``
 writes these files and re-exports the reader.
 """
 
@@ -19,12 +21,14 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 from roadpreview.canbus.samples import RATE_SIGNS, ImuMeasurements, ImuMount
 from roadpreview.errors import InputDataError
+from roadpreview.plausibility import SampleGate
 from roadpreview.types import ImuSample
 
 log = logging.getLogger(__name__)
@@ -103,24 +107,53 @@ def read_imu_csv(path: str | Path) -> ImuMeasurements:
     if skipped:
         log.warning("%s: %d bad IMU row(s) skipped, %d read", path, skipped, len(rows))
     table = np.asarray(rows, dtype=np.float64)
-    return ImuMeasurements(table[:, 0].copy(), table[:, 1:4].copy(), table[:, 4:7].copy())
+    problems: Counter[str] = Counter({"skipped_bad_line": skipped} if skipped else {})
+    return ImuMeasurements(table[:, 0].copy(), table[:, 1:4].copy(), table[:, 4:7].copy(), problems)
 
 
 def imu_samples(
-    meas: ImuMeasurements, source: str = "imu.csv", *, mount: ImuMount | None = None
+    meas: ImuMeasurements,
+    source: str = "imu.csv",
+    *,
+    mount: ImuMount | None = None,
+    gate: SampleGate | None = None,
 ) -> list[ImuSample]:
     """The rows as `ImuSample` in roadpreview's conventions (pitch nose up +: -gyro_y);
     with a ``mount`` (a calibration) first turned into the car's axes and the camera's
-    clock."""
+    clock. Rows the plausibility ``gate`` (default: a new one with the car defaults)
+    rejects are left out, counted in ``gate.problems`` and logged once with the file."""
     if mount is not None:
         meas = mount.apply(meas)
+    gate = gate if gate is not None else SampleGate()
     rates = meas.gyro_rad_s * RATE_SIGNS
-    return [
-        ImuSample(
+    out: list[ImuSample] = []
+    rejected = 0
+    for t, r, a in zip(meas.t_s, rates, meas.accel_m_s2, strict=True):
+        sample = ImuSample(
             float(t),
             (float(r[0]), float(r[1]), float(r[2])),
             (float(a[0]), float(a[1]), float(a[2])),
             source,
         )
-        for t, r, a in zip(meas.t_s, rates, meas.accel_m_s2, strict=True)
-    ]
+        why = gate.check(sample)
+        if why:
+            rejected += 1
+            if rejected == 1:
+                log.warning(
+                    "%s: IMU row at t_s = %.6f skipped: %s (%s); further ones are counted",
+                    source,
+                    sample.t_s,
+                    why,
+                    gate.describe(sample, why),
+                )
+            continue
+        out.append(sample)
+    if rejected:
+        log.warning(
+            "%s: %d implausible IMU row(s) skipped (%s), %d kept",
+            source,
+            rejected,
+            ", ".join(f"{k} {v}" for k, v in sorted(gate.problems.items())),
+            len(out),
+        )
+    return out

@@ -36,6 +36,7 @@ from roadpreview.canbus.dbc import (
     RP_ALERT_DETAIL,
     RP_ALERT_END,
     RP_CONFIRM,
+    RP_INPUT_STATUS,
     RP_ROAD_STATUS,
     RP_STATUS,
     e2e_layout,
@@ -299,6 +300,69 @@ class RoadStatusEncoder(_ProtectedEncoder):
         return self._frame(self.values(status), float(timestamp))
 
 
+#: RP_INPUT_STATUS signal -> the problem reasons it counts (`roadpreview.canbus.decode`,
+#: `roadpreview.plausibility`); the reasons of a source's ``problems``
+INPUT_STATUS_GROUPS: dict[str, tuple[str, ...]] = {
+    "InputRangeRejects": ("rejected_range",),
+    "InputSpikeRejects": ("rejected_spike",),
+    "InputSaturated": ("saturated",),
+    "InputE2eErrors": ("e2e_crc", "e2e_counter_stuck", "e2e_counter_jump"),
+    "InputFormatErrors": (
+        "rejected_id_format",
+        "rejected_dlc",
+        "unknown_id",
+        "decode_error",
+        "not_data_frame",
+    ),
+    "InputStampErrors": ("rejected_stamp", "stamp_jump", "out_of_order", "resynced"),
+}
+#: reasons that are noted, not rejected: they do not set InputDegraded
+_TAKEN_REASONS = frozenset({"e2e_counter_jump", "resynced", "spike_gate_reset"})
+
+
+class InputStatusEncoder(_ProtectedEncoder):
+    """`Status` -> ``RP_INPUT_STATUS`` frame: the input problems of the last period, grouped."""
+
+    def __init__(self, db: Database | None = None, *, channel: int | str | None = None) -> None:
+        super().__init__(RP_INPUT_STATUS, db, channel)
+        self.sent: dict[str, int] = {}  #: ``input_problems_total`` of the last encoded frame
+        self._last_degraded = False
+
+    def due(self, status: Status) -> bool:
+        """True when a frame is to be sent with this status period: while the inputs have
+        new problems, and once more after they stop (the all-clear frame); a clean drive
+        sends none (send type IfActive)."""
+        return self._last_degraded or any(n > 0 for n in self._new(status).values())
+
+    def _new(self, status: Status) -> dict[str, int]:
+        """Per reason, the increase since the last frame (a total that went down: a restart,
+        counted from zero again)."""
+        out: dict[str, int] = {}
+        for reason, total in status.input_problems_total.items():
+            total = max(int(total), 0)
+            before = self.sent.get(reason, 0)
+            out[reason] = total - before if total >= before else total
+        return out
+
+    def values(self, status: Status) -> dict[str, float | int | str]:
+        """The physical signal values (before E2E) of ``status``'s input part."""
+        new = self._new(status)
+        values: dict[str, float | int | str] = {
+            signal: min(sum(new.get(r, 0) for r in reasons), 255)
+            for signal, reasons in INPUT_STATUS_GROUPS.items()
+        }
+        values["InputDegraded"] = int(any(n > 0 for r, n in new.items() if r not in _TAKEN_REASONS))
+        return values
+
+    def encode(self, status: Status, *, timestamp: float = 0.0) -> can.Message:
+        """The next ``RP_INPUT_STATUS`` frame."""
+        values = self.values(status)
+        frame = self._frame(values, float(timestamp))
+        self.sent = {r: max(int(v), 0) for r, v in status.input_problems_total.items()}
+        self._last_degraded = any(int(v) > 0 for k, v in values.items() if k in INPUT_STATUS_GROUPS)
+        return frame
+
+
 class OutputEncoders:
     """roadpreview's output messages, encoded from one database for one detector: what a
     run sends per alert and period (RP_ALERT, then RP_ALERT_DETAIL), at an alert's end
@@ -315,6 +379,7 @@ class OutputEncoders:
         self.confirm = ConfirmEncoder(self.alert.db)
         self.status = StatusEncoder(self.alert.db)
         self.road = RoadStatusEncoder(self.alert.db)
+        self.input = InputStatusEncoder(self.alert.db)
 
     def alert_frames(
         self, send: AlertSend | Alert, *, timestamp: float | None = None
@@ -326,11 +391,15 @@ class OutputEncoders:
         ]
 
     def status_frames(self, status: Status, *, timestamp: float = 0.0) -> list[can.Message]:
-        """The periodic frames: ``RP_STATUS``, then ``RP_ROAD_STATUS``."""
-        return [
+        """The periodic frames: ``RP_STATUS``, ``RP_ROAD_STATUS``, then ``RP_INPUT_STATUS``
+        while the inputs have problems (and once after: `InputStatusEncoder.due`)."""
+        frames = [
             self.status.encode(status, timestamp=timestamp),
             self.road.encode(status, timestamp=timestamp),
         ]
+        if self.input.due(status):
+            frames.append(self.input.encode(status, timestamp=timestamp))
+        return frames
 
 
 def detector_code(detector: str) -> int:
@@ -482,6 +551,16 @@ class ReceivedRoadStatus:
     not_felt: int  #: not-felt alerts, modulo 256
 
 
+@dataclass(frozen=True, slots=True)
+class ReceivedInputStatus:
+    """An ``RP_INPUT_STATUS`` frame as a receiver sees it: input problems of the last period."""
+
+    t_rx_s: float
+    counter: int
+    degraded: bool  #: samples were rejected in the period
+    counts: dict[str, int]  #: signal (`INPUT_STATUS_GROUPS`) -> count, saturating at 255
+
+
 #: what `OutputDecoder.decode` gives for a good frame
 ReceivedOutput = (
     ReceivedAlert
@@ -490,8 +569,17 @@ ReceivedOutput = (
     | ReceivedConfirm
     | ReceivedStatus
     | ReceivedRoadStatus
+    | ReceivedInputStatus
 )
-_OUTPUTS = (RP_ALERT, RP_ALERT_DETAIL, RP_ALERT_END, RP_CONFIRM, RP_STATUS, RP_ROAD_STATUS)
+_OUTPUTS = (
+    RP_ALERT,
+    RP_ALERT_DETAIL,
+    RP_ALERT_END,
+    RP_CONFIRM,
+    RP_STATUS,
+    RP_ROAD_STATUS,
+    RP_INPUT_STATUS,
+)
 
 
 class OutputDecoder:
@@ -606,6 +694,13 @@ class OutputDecoder:
                 background_mps2=opt("ConfirmBackgroundAccel"),
                 arrival_age_s=opt("ConfirmArrivalAge"),
                 precision=opt("ConfirmPrecision", 0.01),
+            )
+        if m.name == RP_INPUT_STATUS:
+            return ReceivedInputStatus(
+                t_rx_s=t,
+                counter=counter,
+                degraded=bool(code("InputDegraded")),
+                counts={name: code(name) for name in INPUT_STATUS_GROUPS},
             )
         if m.name == RP_ROAD_STATUS:
             return ReceivedRoadStatus(

@@ -10,6 +10,7 @@ NaN: IMU rates and accelerations often come in separate messages.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -33,6 +34,8 @@ class ImuMeasurements:
     t_s: Array  #: (n,) sensor time stamps, s
     gyro_rad_s: Array  #: (n, 3) angular rate about x, y, z, rad/s, right-handed
     accel_m_s2: Array  #: (n, 3) specific force along x, y, z, m/s² (gravity included)
+    #: rows the reader skipped, by reason (``skipped_bad_line``)
+    problems: Counter[str] = field(default_factory=Counter, compare=False)
 
     def __post_init__(self) -> None:
         n = len(self.t_s)
@@ -108,7 +111,10 @@ class ImuMount:
         """The measurements in the body's axes, stamps on the camera's clock."""
         R = self.rotation
         return ImuMeasurements(
-            meas.t_s - self.time_offset_s, meas.gyro_rad_s @ R.T, meas.accel_m_s2 @ R.T
+            meas.t_s - self.time_offset_s,
+            meas.gyro_rad_s @ R.T,
+            meas.accel_m_s2 @ R.T,
+            meas.problems,
         )
 
     def apply_sample(self, sample: ImuSample) -> ImuSample:

@@ -27,6 +27,13 @@ linear interpolation in a short history, or extrapolation with the velocity stat
 at most ``max_extrapolation_s`` beyond the newest sample (the IMU stamps of a frame's
 instant arrive after the frame when they lag).
 
+Every sample passes the input plausibility gate first (`roadpreview.plausibility`, the
+same ranges and gyro spike gate as the CAN decoder and the IMU CSV reader): a pitch rate
+or a specific force outside the car's physical range, or a pitch rate spike, is not
+integrated (counted in ``counts``: ``rejected_range``, ``rejected_spike``). A single
+absurd value would otherwise enter the double integration, or the lever arm's
+difference quotient, and leave kilometres of heave.
+
 No accelerometer (absent, NaN), a gap longer than ``max_gap_s`` (the filter restarts
 and needs ``warmup_s`` again) or a query outside the history: the estimate is
 unavailable (``HeaveEstimate.available`` False, ``dz_m`` NaN) and the pipeline applies
@@ -43,6 +50,12 @@ from dataclasses import dataclass
 from roadpreview.configtools import check_ranges, param
 from roadpreview.errors import ConfigError
 from roadpreview.fusion.compensation import heave_term_px
+from roadpreview.plausibility import (
+    REJECTED_RANGE,
+    REJECTED_SPIKE,
+    PlausibilityConfig,
+    SpikeGate,
+)
 from roadpreview.types import ImuSample
 
 log = logging.getLogger(__name__)
@@ -176,9 +189,13 @@ class HeaveObserver:
     the IMU clock with `at`.
     """
 
-    def __init__(self, config: HeaveConfig | None = None) -> None:
+    def __init__(
+        self, config: HeaveConfig | None = None, plausibility: PlausibilityConfig | None = None
+    ) -> None:
         self.config = config or HeaveConfig()
         self.config.validate()
+        self.plausibility = plausibility or PlausibilityConfig()
+        self.plausibility.validate()
         c = self.config
         w0 = 2.0 * math.pi * c.cutoff_hz
         self._k_v = 2.0 * c.damping * w0
@@ -207,6 +224,7 @@ class HeaveObserver:
         self._t_last = -math.inf  # newest accepted accelerometer stamp (kept over restarts)
         self._rate_t = -math.inf
         self._rate = math.nan
+        self._spike = SpikeGate(self.plausibility)
 
     def _note(self, kind: str, msg: str, *args: object) -> None:
         self.counts[kind] += 1
@@ -224,6 +242,17 @@ class HeaveObserver:
     def push(self, sample: ImuSample) -> None:
         """One IMU sample: its pitch rate (lever arm) and/or its specific force."""
         rate = sample.rates_rad_s[1]
+        gate = self.plausibility
+        if not math.isnan(rate) and gate.enabled:
+            if not gate.in_range("pitch_rate", rate):
+                self._note(REJECTED_RANGE, "pitch rate %r rad/s at %r s; dropped", rate, sample.t_s)
+                rate = math.nan
+            elif self._spike.is_spike(sample.t_s, rate):
+                self._spike.rejected()
+                self._note(REJECTED_SPIKE, "pitch rate spike %r rad/s at %r s", rate, sample.t_s)
+                rate = math.nan
+            else:
+                self._spike.accept(sample.t_s, rate)
         if math.isfinite(rate):
             if sample.t_s >= self._rate_t:
                 self._rate_t = sample.t_s
@@ -242,6 +271,10 @@ class HeaveObserver:
         c = self.config
         if not (math.isfinite(t) and math.isfinite(fz)) or abs(fz) > c.max_accel_m_s2:
             self._note("bad_accel", "implausible acceleration %r m/s² at %r s; dropped", fz, t)
+            return
+        gate = self.plausibility
+        if gate.enabled and not (gate.in_range("accel_z", fz) and gate.in_range("accel_x", fx)):
+            self._note(REJECTED_RANGE, "acceleration (%r, %r) m/s² at %r s; dropped", fx, fz, t)
             return
         if t <= self._t_last:
             self._note(

@@ -20,6 +20,7 @@ from roadpreview.ego.vertical import EgoVerticalConfig
 from roadpreview.fusion import BACKENDS
 from roadpreview.fusion.heave import HeaveConfig
 from roadpreview.pitch import ESTIMATORS
+from roadpreview.plausibility import PlausibilityConfig
 from roadpreview.vision.frontend import VisionConfig
 
 
@@ -198,12 +199,15 @@ class PipelineConfig:
     ego: EgoVerticalConfig = field(default_factory=EgoVerticalConfig)
     anomaly: AnomalyConfig = field(default_factory=AnomalyConfig)
     can: CanStageConfig = field(default_factory=CanStageConfig)
+    #: the input gate after the integrity checks: physical ranges, gyro spikes, stamps
+    plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
     lead: LeadKinematicsConfig = field(default_factory=LeadKinematicsConfig)
     daemon: DaemonConfig = field(default_factory=DaemonConfig)
 
     def validate(self, where: str = "") -> None:
         if not where:
             configtools.check_ranges(self)
+            self.plausibility.validate("plausibility")
 
     @classmethod
     def load(cls, path: str | Path) -> PipelineConfig:

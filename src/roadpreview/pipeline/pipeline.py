@@ -211,7 +211,7 @@ class Pipeline:
         self.confirmer = EgoConfirmer(cfg.anomaly.confirm)
         self._lead = LeadKinematics(cfg.lead.window_s)
         on = cfg.heave.enabled
-        self.heave = HeaveObserver(cfg.heave) if on else None
+        self.heave = HeaveObserver(cfg.heave, cfg.plausibility) if on else None
         self._heave_term = HeaveTerm(cfg.heave, camera.fy) if on else None
         self._speed = EgoSpeed()
         self._horizon = HorizonFilter(cfg.fusion.horizon_highpass_s)

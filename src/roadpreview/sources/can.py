@@ -25,6 +25,7 @@ from roadpreview.canbus.live import CanReceiver
 from roadpreview.canbus.logio import CanLogReader, read_can_log
 from roadpreview.canbus.mapping import load_mapping
 from roadpreview.errors import InputDataError
+from roadpreview.plausibility import PlausibilityConfig
 from roadpreview.sources import shifted
 from roadpreview.types import InputSample
 
@@ -34,7 +35,9 @@ log = logging.getLogger(__name__)
 StampFilter = Callable[[Iterable[can.Message]], Iterator[can.Message]]
 
 
-def make_decoder(dbc: str = "", mapping: str = "roadpreview") -> CanInputDecoder:
+def make_decoder(
+    dbc: str = "", mapping: str = "roadpreview", plausibility: PlausibilityConfig | None = None
+) -> CanInputDecoder:
     """The input decoder for a DBC file and a mapping (a file or a shipped name); without
     a DBC, the one the mapping names when that file lies beside the mapping file, else
     roadpreview's own. Quantities the car does not provide are logged once."""
@@ -44,7 +47,9 @@ def make_decoder(dbc: str = "", mapping: str = "roadpreview") -> CanInputDecoder
         if beside.is_file():
             dbc = str(beside)
     db = load_database(dbc or None, strict=not dbc)
-    decoder = CanInputDecoder(db, input_mapping, db_name=dbc or "roadpreview.dbc")
+    decoder = CanInputDecoder(
+        db, input_mapping, db_name=dbc or "roadpreview.dbc", plausibility=plausibility
+    )
     for quantity, why in decoder.missing.items():
         log.warning("CAN input: %s is not available (%s)", quantity, why)
     return decoder
@@ -164,6 +169,11 @@ class CanBusSource:
     def receive_errors(self) -> int:
         """Errors the bus reported."""
         return self.receiver.listener.errors if self.receiver is not None else 0
+
+    @property
+    def problems(self) -> Counter[str]:
+        """The decoder's problem counts by reason."""
+        return self.decoder.problems
 
     @property
     def errors(self) -> int:

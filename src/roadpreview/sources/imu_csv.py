@@ -4,12 +4,14 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
 
 from roadpreview.canbus.imu_csv import imu_samples, read_imu_csv
 from roadpreview.canbus.samples import ImuMeasurements, ImuMount
 from roadpreview.errors import InputDataError
+from roadpreview.plausibility import PlausibilityConfig, SampleGate
 from roadpreview.sources import shifted
 from roadpreview.types import InputSample
 
@@ -21,7 +23,12 @@ class ImuCsvSource:
     live = False
 
     def __init__(
-        self, path: str | Path, *, offset_s: float = 0.0, mount: ImuMount | None = None
+        self,
+        path: str | Path,
+        *,
+        offset_s: float = 0.0,
+        mount: ImuMount | None = None,
+        plausibility: PlausibilityConfig | None = None,
     ) -> None:
         self.path = Path(path)
         self.name = str(self.path)
@@ -31,10 +38,21 @@ class ImuCsvSource:
         self.mount = mount
         self._table: ImuMeasurements | None = None
         self._closed = False
+        self.gate = SampleGate(
+            plausibility
+        )  #: the plausibility gate (ranges, gyro spikes) of the rows
+
+    @property
+    def problems(self) -> Counter[str]:
+        """Rows skipped by the reader and rejected by the plausibility gate, by reason."""
+        table = self._table.problems if self._table is not None else Counter()
+        return table + self.gate.problems
 
     @property
     def errors(self) -> int:
-        return 0  # the reader refuses a file without a valid row and logs skipped rows
+        """Rows lost: skipped as unreadable, or rejected as implausible."""
+        p = self.problems
+        return sum(v for k, v in p.items() if k != "spike_gate_reset")
 
     @property
     def table(self) -> ImuMeasurements:
@@ -49,7 +67,7 @@ class ImuCsvSource:
         return float(self.table.t_s[0])
 
     def __iter__(self) -> Iterator[InputSample]:
-        for s in imu_samples(self.table, source=str(self.path), mount=self.mount):
+        for s in imu_samples(self.table, source=str(self.path), mount=self.mount, gate=self.gate):
             if self._closed:
                 return
             yield shifted(s, self.offset_s)
