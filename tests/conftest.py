@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
@@ -112,3 +112,29 @@ def first_frames() -> Callable[[Path, Path, int], Path]:
         return out
 
     return write
+
+
+@pytest.fixture(scope="session")
+def _log_levels_at_start() -> dict[str, int]:
+    import logging
+
+    from roadpreview.cli.main import PROGRESS_LOGGER
+
+    return {n: logging.getLogger(n).level for n in ("", PROGRESS_LOGGER)}
+
+
+@pytest.fixture(autouse=True)
+def _restore_log_levels(_log_levels_at_start: dict[str, int]) -> Iterator[None]:
+    """`roadpreview.cli.main.main` sets the root and progress loggers' levels (``-q``:
+    errors only) as a command line should; a test (or a module fixture) that calls it
+    must not silence the warnings later tests look for: every test starts and ends with
+    the session's levels."""
+    import logging
+
+    def reset() -> None:
+        for name, level in _log_levels_at_start.items():
+            logging.getLogger(name).setLevel(level)
+
+    reset()
+    yield
+    reset()
