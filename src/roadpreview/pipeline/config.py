@@ -56,6 +56,15 @@ class FusionStageConfig:
         " constant: the slow part is the road's grade (and start-up drift), which the lead,"
         " on the same road 5-40 m ahead, shares; bump pitching is 0.5-2 Hz",
     )
+    max_pitch_rad: float = param(
+        0.5,
+        unit="rad",
+        gt=0.0,
+        lt=1.5,
+        help="a fused pitch beyond this (29 deg: no car pitches so far, grades included) is a"
+        " diverged fusion: the frame is not compensated (no alert from it), the fusion is"
+        " reset, and it is logged and counted (pitch_diverged)",
+    )
 
 
 @dataclass(frozen=True)

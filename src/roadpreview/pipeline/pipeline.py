@@ -215,6 +215,7 @@ class Pipeline:
         self._heave_term = HeaveTerm(cfg.heave, camera.fy) if on else None
         self._speed = EgoSpeed()
         self._horizon = HorizonFilter(cfg.fusion.horizon_highpass_s)
+        self.pitch_divergences = 0  #: frames whose fused pitch was beyond max_pitch_rad
         self._key_index = -1
         self._phi = 0.0
         self.frames = 0
@@ -295,7 +296,18 @@ class Pipeline:
         if pitch_reason:
             self.fusion.push_vision_failure(t, pitch_reason)
         fused: FusedPitch = self.fusion.estimate(t)
-        phi = fused.phi if math.isfinite(fused.phi) else 0.0
+        diverged = math.isfinite(fused.phi) and abs(fused.phi) > cfg.fusion.max_pitch_rad
+        if diverged:  # no car pitches so far: the fusion has diverged; start it again
+            self.pitch_divergences += 1
+            log.error(
+                "event=pitch_diverged t=%.3f phi_deg=%.1f count=%d: fusion reset, frame not"
+                " compensated",
+                t,
+                math.degrees(fused.phi),
+                self.pitch_divergences,
+            )
+            self.fusion.reset()
+        phi = fused.phi if math.isfinite(fused.phi) and not diverged else 0.0
         self._phi = phi
         self._horizon.update(t, phi)
 
@@ -303,7 +315,9 @@ class Pipeline:
         f = self.camera.fy
         heave_m, heave_px = self._heave(t, fused, lead.distance_m, lead.target_changed)
         y_c, y_c_l, y_c_r = (
-            float(compensation(v, phi, f)) - heave_px if math.isfinite(v) else math.nan
+            float(compensation(v, phi, f)) - heave_px
+            if math.isfinite(v) and not diverged
+            else math.nan
             for v in (lead.y, lead.y_left, lead.y_right)
         )
         ego_speed = self._speed.speed_mps
