@@ -1,6 +1,7 @@
-"""``roadpreview bench soak`` in miniature: a 3 s drive instead of 30 min. The report's
-structure and its physical sanity (RSS sampled, costs positive, a part of a frame never
-costing more than the frame), never timing thresholds (docs/robustness.md)."""
+"""``roadpreview bench soak`` in miniature: a 3 s drive played twice for 5 s instead of
+three 2 min drives cycled for 30 min. The report's structure and its physical sanity (RSS
+sampled, costs positive, a part of a frame never costing more than the frame), the
+chained drive's clock, never timing thresholds (docs/robustness.md)."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ import pytest
 from roadpreview.bench import BENCHMARKS, LONG
 from roadpreview.bench.soak import (
     CHECKPOINTS,
+    ChainedDrive,
     SoakOptions,
     container_sizes,
     grown_containers,
@@ -28,6 +30,8 @@ from roadpreview.bench.soak import (
     window_median,
 )
 from roadpreview.errors import ConfigError
+from roadpreview.pipeline.config import PipelineConfig
+from roadpreview.types import CameraFrame
 
 if TYPE_CHECKING:
     from roadpreview.sim.recording import Recording
@@ -47,13 +51,42 @@ def _frame_times(folder: Path) -> list[float]:
         return [float(row["t_s"]) for row in csv.DictReader(fh)]
 
 
-def test_soak_report_is_complete_and_physically_sane(drive: Recording) -> None:
+def test_chained_drive_runs_on_one_clock_across_the_seam(drive: Recording) -> None:
     times = _frame_times(drive.folder)
-    report = soak(drive.folder, options=SoakOptions(minutes=3 / 60, rss_every_s=0.5), window_s=1)
+    dt = 1.0 / drive.config.camera.fps
+    chain = ChainedDrive([drive.folder], 5.0, PipelineConfig())
+    samples = list(chain)
+    chain.close()
+    assert chain.passes == 2
+    assert chain.errors == 0
+    t = np.array([s.t_s for s in samples])
+    assert np.all(np.diff(t) >= 0)  # one clock, never backwards
+    frames = [s for s in samples if isinstance(s, CameraFrame)]
+    assert [f.index for f in frames] == list(range(len(frames)))
+    ft = np.array([f.t_s for f in frames])
+    assert np.all(np.diff(ft) > 0)
+    # the first pass is the recording itself; the second starts one frame interval after
+    # the first pass's last sample and keeps the recording's frame spacing (1 µs: frames.csv)
+    n = len(times)
+    assert ft[:n] - ft[0] == pytest.approx(np.array(times) - times[0], abs=2e-6)
+    assert np.diff(ft[n:]) == pytest.approx(np.diff(times[: len(ft) - n]), abs=2e-6)
+    (_, end_1), (start_2, _) = chain.spans
+    assert start_2 - end_1 == pytest.approx(dt, abs=1e-6)  # Unix times: 0.24 µs a step
+    assert ft[n] >= start_2
+    # 5 s from the first sample, not a frame more
+    assert ft[-1] - t[0] <= 5.0
+    assert ft[-1] - t[0] > 5.0 - 2 * dt
 
-    # every frame replayed; the drive's span is the frames' span (frames.csv, 1 µs rounding)
-    assert report.frames == len(times)
-    assert report.drive_s == pytest.approx(times[-1] - times[0], abs=1e-5)
+
+def test_soak_report_is_complete_and_physically_sane(drive: Recording) -> None:
+    fps = drive.config.camera.fps
+    options = SoakOptions(minutes=5 / 60, drives=1, fps=fps, rss_every_s=0.5)
+    report = soak([drive.folder], options=options, window_s=1)
+
+    # 5 s of frames over two passes of the 3 s drive, nothing lost
+    assert report.passes == 2
+    assert report.frames == pytest.approx(5 * fps, abs=2)
+    assert 5.0 - 2 / fps < report.drive_s <= 5.0
     assert report.source_errors
     assert not any(report.source_errors.values())
 
@@ -92,12 +125,14 @@ def test_bench_soak_writes_its_json_and_reuses_a_cached_drive(
 ) -> None:
     assert BENCHMARKS["soak"] == "roadpreview.bench.soak"
     assert "soak" in LONG  # not in 'bench all'
-    options = SoakOptions(minutes=3 / 60, width=320, height=180, fps=30.0, seed=0)
-    shutil.copytree(drive.folder, tmp_path / "cache" / options.key)  # nothing to render
+    options = SoakOptions(minutes=3 / 60, drives=1, drive_minutes=0.25, fps=30.0, seed=0)
+    shutil.copytree(drive.folder, tmp_path / "cache" / options.key(0))  # nothing to render
     out = tmp_path / "soak.json"
     table = run(
         seed=0,
         minutes=options.minutes,
+        drives=1,
+        drive_minutes=0.25,
         resolution="320x180",
         fps=30.0,
         json_path=out,
@@ -108,7 +143,8 @@ def test_bench_soak_writes_its_json_and_reuses_a_cached_drive(
     for q in ("10 %", "50 %", "90 %", "100 %"):
         assert any(line.startswith(q) for line in table.splitlines())
     data = json.loads(out.read_text())
-    assert data["frames"] == len(_frame_times(drive.folder))
+    assert data["frames"] == len(_frame_times(drive.folder))  # 3 s: one pass, all of it
+    assert data["passes"] == 1
     assert data["render_s"] == 0.0  # the cached drive was used
     assert set(data["costs"]) >= {"fusion_cpu_ms", "detector_cpu_ms", "frame_cpu_ms"}
     assert len(data["checkpoints"]) == len(CHECKPOINTS)
@@ -157,3 +193,5 @@ def test_window_median_and_bad_options() -> None:
         parse_resolution("640by360")
     with pytest.raises(ConfigError, match="--minutes"):
         SoakOptions(minutes=0).validate()
+    with pytest.raises(ConfigError, match="--drive-minutes"):
+        SoakOptions(drive_minutes=0.1).validate()

@@ -19,7 +19,8 @@ Measured while the replay runs, in preallocated arrays (the probe does not grow)
   ``restart``) and of the whole ``Pipeline.push`` of the frame;
 * at 10, 50, 90 and 100 % of the drive: the number of Python objects the collector
   tracks and the length of every container reachable from the pipeline's attributes
-  (lists, dicts, deques, sets, arrays), so that a buffer that grows is named.
+  (lists, dicts, deques, sets, arrays) and from the CAN sink's (the alerts' repetition),
+  so that a buffer that grows is named.
 
 Reported: RSS at 10/50/90/100 % and whether it stays within 10 % (max - min over the RSS
 at 10 %), the per-frame costs as medians over the first and the last minute of drive
@@ -53,6 +54,7 @@ from numpy.typing import NDArray
 from roadpreview.bench._timing import format_table
 from roadpreview.errors import ConfigError
 from roadpreview.pipeline.pipeline import FrameResult, Pipeline
+from roadpreview.sources import Source
 from roadpreview.types import Alert, CameraFrame, Sample, Status
 
 log = logging.getLogger(__name__)
@@ -74,26 +76,35 @@ DETECTOR_CALLS = ("push", "restart")
 class SoakOptions:
     """What the soak drives and how often it measures."""
 
-    minutes: float = 30.0  #: minutes of simulated driving (issue 17: at least 30)
-    width: int = 320  #: px; 320x180 renders at ~17 ms per frame here
+    minutes: float = 30.0  #: minutes of driving the pipeline sees (issue 17: at least 30)
+    drives: int = 3  #: distinct simulated drives, played one after the other in a cycle
+    drive_minutes: float = 2.0  #: minutes of each drive (rendering slows with the road's length)
+    width: int = 320  #: px; 320x180: ~17 ms per frame to render a 1 min drive
     height: int = 180  #: px
     fps: float = 10.0  #: camera frames per second of the drive (30 fps: three times the time)
-    seed: int = 0  #: the drive's seed (the ``wild`` preset)
+    seed: int = 0  #: the first drive's seed (``wild`` preset); the others: seed + 1, ...
     rss_every_s: float = 1.0  #: drive seconds between two RSS samples
 
     def validate(self) -> None:
         if not (self.minutes > 0 and math.isfinite(self.minutes)):
             raise ConfigError(f"--minutes {self.minutes}: a positive number of minutes")
+        if not (self.drive_minutes >= 0.25 and math.isfinite(self.drive_minutes)):
+            raise ConfigError(
+                f"--drive-minutes {self.drive_minutes}: at least 0.25 (the wild preset's "
+                "manoeuvres fall between 5 s and the drive's last 5 s)"
+            )
+        if self.drives < 1:
+            raise ConfigError(f"--drives {self.drives}: at least 1")
         if self.width < 160 or self.height < 90:
             raise ConfigError(f"--resolution {self.width}x{self.height}: at least 160x90")
         if not 5.0 <= self.fps <= 120.0:
             raise ConfigError(f"--fps {self.fps}: 5 to 120 frames per second")
 
-    @property
-    def key(self) -> str:
-        """The rendered drive's folder name in a cache."""
+    def key(self, index: int) -> str:
+        """Drive ``index``'s folder name in a cache."""
         return (
-            f"wild-seed{self.seed}-{self.minutes:g}min-{self.width}x{self.height}-{self.fps:g}fps"
+            f"wild-seed{self.seed + index}-{self.drive_minutes:g}min-"
+            f"{self.width}x{self.height}-{self.fps:g}fps"
         )
 
 
@@ -188,8 +199,18 @@ class SoakProbe:
     of the fusion, the detector and the whole push, and samples the RSS and the
     containers (module docstring). Arrays are sized for ``n_frames`` up front."""
 
-    def __init__(self, pipeline: Pipeline, n_frames: int, rss_every_frames: int) -> None:
+    def __init__(
+        self,
+        pipeline: Pipeline,
+        n_frames: int,
+        rss_every_frames: int,
+        *,
+        watch: tuple[object, ...] = (),
+    ) -> None:
+        """``watch``: more objects whose containers are sized at the checkpoints (the
+        sinks)."""
         self.pipeline = pipeline
+        self.watch = (pipeline, *watch)
         self.fusion_clock = CostClock()
         self.detector_clock = CostClock()
         time_calls(pipeline.fusion, FUSION_CALLS, self.fusion_clock)
@@ -199,12 +220,15 @@ class SoakProbe:
         #: per frame, ms: columns fusion, detector, frame (CPU), then the same as wall time
         self.ms = np.full((n_frames, 6), np.nan)
         self.every = max(1, rss_every_frames)
-        n_rss = n_frames // self.every + 2
+        n_rss = n_frames // self.every + 2 + len(CHECKPOINTS)
         self.rss_t = np.full(n_rss, np.nan)
         self.rss = np.full(n_rss, np.nan)
         self.n_rss = 0
-        self.marks = [max(1, math.ceil(q * n_frames)) for q in CHECKPOINTS]
-        self.snapshots: dict[int, dict[str, Any]] = {}
+        #: frame count -> checkpoint, but the last: taken at the end of input, after the last
+        #: frame (``n_frames`` is the frames expected: the drive may end a frame early)
+        self.marks = {max(1, math.ceil(q * n_frames)): q for q in CHECKPOINTS[:-1]}
+        self.snapshots: dict[float, dict[str, Any]] = {}  #: checkpoint -> what it saw
+        self._last_t = math.nan
 
     @property
     def input_errors(self) -> int:
@@ -232,10 +256,13 @@ class SoakProbe:
         if self.n % self.every == 0 or self.n == 1:
             self._sample_rss(sample.t_s)
         if self.n in self.marks:
-            self._snapshot(sample.t_s)
+            self._snapshot(self.marks[self.n], sample.t_s)
+        self._last_t = sample.t_s
         return result
 
     def finish(self) -> list[Alert]:
+        if self.n:
+            self._snapshot(CHECKPOINTS[-1], self._last_t)
         return self.pipeline.finish()
 
     def status(self) -> Status:
@@ -247,13 +274,13 @@ class SoakProbe:
             self.rss[self.n_rss] = rss_mb()
             self.n_rss += 1
 
-    def _snapshot(self, t: float) -> None:
+    def _snapshot(self, checkpoint: float, t: float) -> None:
         self._sample_rss(t)
-        self.snapshots[self.n] = {
+        self.snapshots[checkpoint] = {
             "t_s": t,
             "rss_mb": rss_mb(),
             "gc_objects": len(gc.get_objects()),
-            "containers": container_sizes(self.pipeline),
+            "containers": {k: v for w in self.watch for k, v in container_sizes(w).items()},
         }
 
 
@@ -291,6 +318,7 @@ class SoakReport:
     drive_s: float
     wall_s: float
     render_s: float
+    passes: int  #: drives played (the last one cut at ``minutes``)
     #: one row per checkpoint: fraction, drive time from the first frame (s), RSS (MB), gc
     #: objects, and the median per-frame costs (ms) over the minute before it
     checkpoints: list[dict[str, float]]
@@ -333,8 +361,8 @@ def summarise(
     t, ms = probe.t[:n], probe.ms[:n]
     t0, t1 = float(t[0]), float(t[-1])
     rows: list[dict[str, float]] = []
-    for q, mark in zip(CHECKPOINTS, probe.marks, strict=True):
-        snap = probe.snapshots.get(mark)
+    for q in CHECKPOINTS:
+        snap = probe.snapshots.get(q)
         if snap is None:
             continue
         at = float(snap["t_s"])
@@ -356,17 +384,96 @@ def summarise(
     }
     rss = [r["rss_mb"] for r in rows]
     spread = (max(rss) - min(rss)) / rss[0] if rss else math.nan
-    grown = grown_containers([probe.snapshots[m]["containers"] for m in sorted(probe.snapshots)])
+    grown = grown_containers([probe.snapshots[q]["containers"] for q in sorted(probe.snapshots)])
     return rows, costs, bool(spread <= FLAT_WITHIN), spread, grown
 
 
-# -- the run -------------------------------------------------------------------------------
-def drive_config(options: SoakOptions) -> Any:
-    """The scenario of the soak's drive (``wild``, resized, no IMU CSV: the CAN log only)."""
+# -- the drive -----------------------------------------------------------------------------
+class ChainedDrive:
+    """Recording folders replayed one after the other, cycling, on one continuous clock,
+    until ``duration_s`` of camera frames: a `roadpreview.sources.Source`.
+
+    Each pass reads a folder's video and CAN log as `ReplayInputs.sources` puts them on
+    the drive's clock, and moves every sample by the offset that puts the pass's first
+    sample one frame interval after the previous pass's last. The seams are cuts (the
+    scene, the lead and the speed jump), as a camera switch would be; frame numbers
+    run on."""
+
+    live = False
+
+    def __init__(self, folders: list[Path], duration_s: float, config: Any) -> None:
+        if not folders:
+            raise ConfigError("soak: no recording to replay")
+        self.folders = folders
+        self.duration_s = duration_s
+        self.config = config
+        self.name = f"soak drive ({len(folders)} recordings, cycled)"
+        self.passes = 0  #: passes that gave at least one frame
+        #: per pass begun: the times (on the chain's clock) of its first and last samples
+        self.spans: list[tuple[float, float]] = []
+        self._lost = 0  #: samples the finished passes' sources lost
+        self._open: list[Source] = []
+
+    @property
+    def errors(self) -> int:
+        return self._lost + sum(s.errors for s in self._open)
+
+    def __iter__(self) -> Iterator[Sample]:
+        from roadpreview.apps.replay import ReplayInputs
+        from roadpreview.sources import merge_sources
+
+        first_t = math.nan
+        last_t = -math.inf
+        index = 0
+        k = 0
+        while True:
+            folder = self.folders[k % len(self.folders)]
+            k += 1
+            inputs = ReplayInputs.from_recording(folder)
+            video, sources = inputs.sources(self.config)
+            gap = 1.0 / video.fps if video.fps > 0 else 0.1
+            self._open = list(sources)
+            offset = math.nan
+            framed = False
+            try:
+                for sample in merge_sources(sources):
+                    if math.isnan(offset):
+                        offset = 0.0 if math.isnan(first_t) else last_t + gap - sample.t_s
+                        self.spans.append((sample.t_s + offset, sample.t_s + offset))
+                    t = sample.t_s + offset
+                    if math.isnan(first_t):
+                        first_t = t
+                    if isinstance(sample, CameraFrame):
+                        if t - first_t > self.duration_s:
+                            return
+                        if not framed:
+                            framed = True
+                            self.passes += 1
+                        yield replace(sample, t_s=t, index=index)
+                        index += 1
+                    else:
+                        yield replace(sample, t_s=t)
+                    last_t = t
+                    self.spans[-1] = (self.spans[-1][0], t)
+            finally:
+                self._lost += sum(s.errors for s in self._open)
+                for s in self._open:
+                    s.close()
+                self._open = []
+            if math.isnan(offset):  # an empty recording: stop rather than spin
+                return
+
+    def close(self) -> None:
+        for s in self._open:
+            s.close()
+
+
+def drive_config(options: SoakOptions, index: int) -> Any:
+    """Drive ``index`` of the soak (``wild``, seed + index, resized, the CAN log only)."""
     from roadpreview.sim.presets import wild
     from roadpreview.sim.scenario import CameraSpec
 
-    cfg = wild(options.seed, duration_s=options.minutes * 60.0)
+    cfg = wild(options.seed + index, duration_s=options.drive_minutes * 60.0)
     cam = cfg.camera
     camera = CameraSpec(
         width=options.width,
@@ -384,26 +491,28 @@ def _render(cfg: Any, folder: str) -> float:
     return write_recording(cfg, folder).seconds
 
 
-def render_drive(options: SoakOptions, folder: Path) -> float:
-    """Render the soak's drive into ``folder`` in a child process (seconds taken; 0 when
-    ``folder`` already holds it)."""
-    if (folder / "truth.json").is_file():
-        log.info("soak: reusing the drive in %s", folder)
-        return 0.0
+def render_drives(options: SoakOptions, base: Path) -> tuple[list[Path], float]:
+    """The soak's drives in ``base`` (rendered in child processes, two at a time, unless
+    already there) and the CPU-bound seconds spent rendering (summed over the drives)."""
+    folders = [base / options.key(i) for i in range(options.drives)]
+    todo = [(i, f) for i, f in enumerate(folders) if not (f / "truth.json").is_file()]
+    if not todo:
+        return folders, 0.0
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
-        return float(pool.submit(_render, drive_config(options), str(folder)).result())
+    with ProcessPoolExecutor(max_workers=min(2, len(todo)), mp_context=ctx) as pool:
+        jobs = [pool.submit(_render, drive_config(options, i), str(f)) for i, f in todo]
+        return folders, float(sum(j.result() for j in jobs))
 
 
 def soak(
-    recording: Path,
+    folders: list[Path],
     *,
     options: SoakOptions | None = None,
     window_s: float = WINDOW_S,
     render_s: float = 0.0,
 ) -> SoakReport:
-    """Replay ``recording`` (a recording folder) through the pipeline into a CAN log,
-    measuring as the module docstring says."""
+    """Replay ``folders`` (recording folders, `ChainedDrive`) for ``options.minutes``
+    through the pipeline into a CAN log, measuring as the module docstring says."""
     from roadpreview.apps.replay import ReplayInputs
     from roadpreview.loop import run
     from roadpreview.pipeline.config import PipelineConfig
@@ -411,22 +520,23 @@ def soak(
 
     options = options or SoakOptions()
     config = PipelineConfig()
-    inputs = ReplayInputs.from_recording(recording)
-    video, sources = inputs.sources(config)
-    n_frames = video.n_frames
-    fps = video.fps if video.fps > 0 else options.fps
-    probe = SoakProbe(
-        Pipeline(inputs.camera, config),
-        n_frames,
-        rss_every_frames=round(options.rss_every_s * fps),
-    )
+    inputs = ReplayInputs.from_recording(folders[0])
+    drive = ChainedDrive(folders, options.minutes * 60.0, config)
+    fps = options.fps
+    n_frames = math.floor(options.minutes * 60.0 * fps) + 2
     with tempfile.TemporaryDirectory() as tmp:
         sink = CanLogSink(
             Path(tmp) / "alerts.blf",
             detector=config.anomaly.detector,
             repetition=repetition_config(config),
         )
-        summary = run(sources, probe, [sink], status_period_s=config.can.status_period_s)
+        probe = SoakProbe(
+            Pipeline(inputs.camera, config),
+            n_frames,
+            rss_every_frames=round(options.rss_every_s * fps),
+            watch=(sink,),
+        )
+        summary = run([drive], probe, [sink], status_period_s=config.can.status_period_s)
     rows, costs, flat, spread, grown = summarise(probe, window_s)
     n = min(probe.n, probe.t.size)
     t0 = float(probe.t[0]) if n else math.nan
@@ -436,6 +546,7 @@ def soak(
         drive_s=float(probe.t[n - 1] - probe.t[0]) if n else 0.0,
         wall_s=summary.seconds,
         render_s=render_s,
+        passes=drive.passes,
         window_s=window_s,
         checkpoints=rows,
         costs=costs,
@@ -459,7 +570,9 @@ def format_report(report: SoakReport) -> str:
     win = f"{report.window_s:g} s"
     head = (
         f"roadpreview bench soak: {report.drive_s / 60:.1f} min of simulated driving "
-        f"(wild, seed {o.seed}, {o.width}x{o.height} at {o.fps:g} fps, {report.frames} frames) "
+        f"({o.drives} wild drives of {o.drive_minutes:g} min, seeds {o.seed}-"
+        f"{o.seed + o.drives - 1}, cycled: {report.passes} passes; {o.width}x{o.height} at "
+        f"{o.fps:g} fps, {report.frames} frames) "
         f"replayed in {report.wall_s / 60:.1f} min; costs: CPU ms per frame, medians over the "
         f"{win} of drive before each checkpoint"
     )
@@ -510,51 +623,57 @@ def run(
     seed: int = 0,
     *,
     minutes: float | None = None,
+    drives: int = 3,
+    drive_minutes: float = 2.0,
     resolution: str | None = None,
     fps: float | None = None,
     json_path: str | Path | None = None,
     cache: str | Path | None = None,
 ) -> str:
     """The benchmark's entry (`roadpreview.bench`): render (or reuse from ``cache``) the
-    drive, soak it, write the JSON report to ``json_path`` and return the table.
-    ``repeats`` does not apply (one long run); ``quick``: 2 minutes."""
+    drives, soak them, write the JSON report to ``json_path`` and return the table.
+    ``repeats`` does not apply (one long run); ``quick``: 4 minutes."""
     del repeats
     w, h = parse_resolution(resolution) if resolution else (320, 180)
     options = SoakOptions(
-        minutes=minutes if minutes is not None else (2.0 if quick else 30.0),
+        minutes=minutes if minutes is not None else (4.0 if quick else 30.0),
+        drives=drives,
+        drive_minutes=drive_minutes,
         width=w,
         height=h,
         fps=fps or 10.0,
         seed=seed,
     )
     options.validate()
-    logging.getLogger("roadpreview").setLevel(logging.ERROR)  # 27,000 frames of warnings
-    with _drive_folder(cache, options) as folder:
-        render_s = render_drive(options, folder)
-        report = soak(folder, options=options, render_s=render_s)
+    logging.getLogger("roadpreview").setLevel(logging.ERROR)  # 18,000 frames of warnings
+    with _cache_dir(cache) as base:
+        folders, render_s = render_drives(options, base)
+        report = soak(folders, options=options, render_s=render_s)
     if json_path is not None:
         Path(json_path).write_text(json.dumps(report.to_json(), indent=1))
     return format_report(report)
 
 
 @contextmanager
-def _drive_folder(cache: str | Path | None, options: SoakOptions) -> Iterator[Path]:
-    """The drive's folder: in ``cache`` (kept for the next run) or a temporary directory."""
+def _cache_dir(cache: str | Path | None) -> Iterator[Path]:
+    """Where the drives go: ``cache`` (kept for the next run) or a temporary directory."""
     if cache is not None:
         Path(cache).mkdir(parents=True, exist_ok=True)
-        yield Path(cache) / options.key
+        yield Path(cache)
         return
     with tempfile.TemporaryDirectory() as tmp:
-        yield Path(tmp) / options.key
+        yield Path(tmp)
 
 
 __all__ = [
+    "ChainedDrive",
     "SoakOptions",
     "SoakProbe",
     "SoakReport",
     "container_sizes",
     "format_report",
     "grown_containers",
+    "render_drives",
     "rss_mb",
     "run",
     "soak",

@@ -27,7 +27,13 @@ def add_subparser(sub: Any) -> None:
         type=float,
         default=30.0,
         metavar="MIN",
-        help="minutes of simulated driving (--quick: 2)",
+        help="minutes of driving the pipeline sees (--quick: 4)",
+    )
+    soak.add_argument(
+        "--drives", type=int, default=3, help="distinct simulated drives, cycled to fill --minutes"
+    )
+    soak.add_argument(
+        "--drive-minutes", type=float, default=2.0, metavar="MIN", help="minutes of each drive"
     )
     soak.add_argument(
         "--resolution", default="320x180", metavar="WxH", help="camera size of the drive, px"
@@ -53,6 +59,8 @@ def _run(args: argparse.Namespace) -> int:
         if name == "soak":
             options = {
                 "minutes": None if args.quick and args.minutes == 30.0 else args.minutes,
+                "drives": args.drives,
+                "drive_minutes": args.drive_minutes,
                 "resolution": args.resolution,
                 "fps": args.fps,
                 "json_path": args.json,
