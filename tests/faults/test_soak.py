@@ -59,6 +59,7 @@ def test_chained_drive_runs_on_one_clock_across_the_seam(drive: Recording) -> No
     chain.close()
     assert chain.passes == 2
     assert chain.errors == 0
+    assert sum(chain.problems.values()) == 0  # a clean drive: no problem of any kind
     t = np.array([s.t_s for s in samples])
     assert np.all(np.diff(t) >= 0)  # one clock, never backwards
     frames = [s for s in samples if isinstance(s, CameraFrame)]

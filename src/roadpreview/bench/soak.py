@@ -40,8 +40,8 @@ import resource
 import tempfile
 import time
 from array import array
-from collections import deque
-from collections.abc import Callable, Iterator
+from collections import Counter, deque
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
@@ -332,6 +332,7 @@ class SoakReport:
     alerts: int = 0
     mode_changes: int = 0
     source_errors: dict[str, int] = field(default_factory=dict)
+    source_problems: dict[str, int] = field(default_factory=dict)  #: reason -> count
     fusion_stats: dict[str, int] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
@@ -412,7 +413,17 @@ class ChainedDrive:
         #: per pass begun: the times (on the chain's clock) of its first and last samples
         self.spans: list[tuple[float, float]] = []
         self._lost = 0  #: samples the finished passes' sources lost
+        self._problems: Counter[str] = Counter()  #: the finished passes' problem counts
         self._open: list[Source] = []
+
+    @property
+    def problems(self) -> Counter[str]:
+        """Reason -> count over every pass, from the sources that count their problems
+        (the shared per-source contract: ``problems``, a mapping)."""
+        out = Counter(self._problems)
+        for s in self._open:
+            out.update(_problems_of(s))
+        return out
 
     @property
     def errors(self) -> int:
@@ -458,6 +469,7 @@ class ChainedDrive:
             finally:
                 self._lost += sum(s.errors for s in self._open)
                 for s in self._open:
+                    self._problems.update(_problems_of(s))
                     s.close()
                 self._open = []
             if math.isnan(offset):  # an empty recording: stop rather than spin
@@ -466,6 +478,11 @@ class ChainedDrive:
     def close(self) -> None:
         for s in self._open:
             s.close()
+
+
+def _problems_of(source: object) -> Mapping[str, int]:
+    problems = getattr(source, "problems", None)
+    return problems if isinstance(problems, Mapping) else {}
 
 
 def drive_config(options: SoakOptions, index: int) -> Any:
@@ -560,6 +577,7 @@ def soak(
         alerts=len(summary.alerts),
         mode_changes=len(summary.mode_changes),
         source_errors=dict(summary.source_errors),
+        source_problems=dict(drive.problems),
         fusion_stats=dict(getattr(probe.pipeline.fusion, "stats", {})),
     )
 
