@@ -12,7 +12,7 @@ import shutil
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pytest
@@ -23,14 +23,16 @@ from roadpreview.bench.soak import (
     ChainedDrive,
     SoakOptions,
     container_sizes,
+    format_report,
     grown_containers,
     parse_resolution,
     run,
     soak,
     window_median,
 )
-from roadpreview.errors import ConfigError
+from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.pipeline.config import PipelineConfig
+from roadpreview.pipeline.pipeline import Pipeline
 from roadpreview.types import CameraFrame
 
 if TYPE_CHECKING:
@@ -119,6 +121,35 @@ def test_soak_report_is_complete_and_physically_sane(drive: Recording) -> None:
             assert c[f"{part}_cpu_ms"] <= c[f"{part}_wall_ms"] * 1.05 + TICK_MS
     for r in report.checkpoints:
         assert 0 < r["detector_wall_ms"] <= r["frame_wall_ms"]
+
+
+def test_an_error_that_ends_the_drive_is_the_reports_finding(
+    drive: Recording, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The soak does not die with the drive: it reports what ended it, when, and what it
+    measured until then (the end checkpoint at the last frame that went through)."""
+    times = _frame_times(drive.folder)
+    fail_at = 40
+    original = Pipeline.push_vision
+
+    def push_vision(self: Pipeline, t: float, fv: Any) -> Any:
+        if self.frames == fail_at:
+            raise InputDataError("compensation: |phi| must be below pi/2 rad")
+        return original(self, t, fv)
+
+    monkeypatch.setattr(Pipeline, "push_vision", push_vision)
+    options = SoakOptions(minutes=3 / 60, drives=1, fps=drive.config.camera.fps)
+    report = soak([drive.folder], options=options, window_s=1)
+    assert report.frames == fail_at
+    assert report.error == "InputDataError: compensation: |phi| must be below pi/2 rad"
+    assert report.error_at_s == pytest.approx(times[fail_at] - times[0], abs=1e-5)
+    end = report.checkpoints[-1]
+    assert end["fraction"] == 1.0
+    assert end["drive_s"] == pytest.approx(times[fail_at - 1] - times[0], abs=1e-5)
+    table = format_report(report)
+    assert "THE RUN ENDED EARLY" in table
+    assert "InputDataError" in table
+    assert any(line.startswith("end ") for line in table.splitlines())
 
 
 def test_bench_soak_writes_its_json_and_reuses_a_cached_drive(

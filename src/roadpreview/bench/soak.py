@@ -229,6 +229,10 @@ class SoakProbe:
         self.marks = {max(1, math.ceil(q * n_frames)): q for q in CHECKPOINTS[:-1]}
         self.snapshots: dict[float, dict[str, Any]] = {}  #: checkpoint -> what it saw
         self._last_t = math.nan
+        self.alerts = 0  #: alerts raised (frames and the end's flush)
+        self.mode_changes = 0  #: frames whose fusion mode differs from the previous one's
+        self._mode: object = None
+        self.failed_t = math.nan  #: the time of the frame whose push raised, if one did
 
     @property
     def input_errors(self) -> int:
@@ -242,7 +246,15 @@ class SoakProbe:
         if not isinstance(sample, CameraFrame):
             return self.pipeline.push(sample)
         c0, w0 = time.thread_time(), time.perf_counter()
-        result = self.pipeline.push(sample)
+        try:
+            result = self.pipeline.push(sample)
+        except Exception:
+            self.failed_t = sample.t_s
+            raise
+        self.alerts += len(result.alerts)
+        if result.mode != self._mode:
+            self.mode_changes += self._mode is not None
+            self._mode = result.mode
         frame_cpu, frame_wall = time.thread_time() - c0, time.perf_counter() - w0
         fusion_cpu, fusion_wall = self.fusion_clock.take()
         det_cpu, det_wall = self.detector_clock.take()
@@ -263,7 +275,9 @@ class SoakProbe:
     def finish(self) -> list[Alert]:
         if self.n:
             self._snapshot(CHECKPOINTS[-1], self._last_t)
-        return self.pipeline.finish()
+        tail = self.pipeline.finish()
+        self.alerts += len(tail)
+        return tail
 
     def status(self) -> Status:
         return self.pipeline.status()
@@ -333,6 +347,10 @@ class SoakReport:
     mode_changes: int = 0
     source_errors: dict[str, int] = field(default_factory=dict)
     source_problems: dict[str, int] = field(default_factory=dict)  #: reason -> count
+    #: the exception that ended the run before ``minutes`` ('' if none), and the drive time
+    #: (s from the first frame) of the frame whose push raised it
+    error: str = ""
+    error_at_s: float = math.nan
     fusion_stats: dict[str, int] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
@@ -553,15 +571,22 @@ def soak(
             rss_every_frames=round(options.rss_every_s * fps),
             watch=(sink,),
         )
-        summary = run([drive], probe, [sink], status_period_s=config.can.status_period_s)
+        error = ""
+        wall0 = time.perf_counter()
+        try:
+            run([drive], probe, [sink], status_period_s=config.can.status_period_s)
+        except Exception as exc:  # what ended the drive is the soak's finding: reported
+            error = f"{type(exc).__name__}: {exc}"
+            log.error("soak: the run ended at frame %d: %s", probe.n, error)
+        wall_s = time.perf_counter() - wall0
     rows, costs, flat, spread, grown = summarise(probe, window_s)
     n = min(probe.n, probe.t.size)
     t0 = float(probe.t[0]) if n else math.nan
     return SoakReport(
         options=options,
-        frames=summary.frames,
+        frames=probe.n,
         drive_s=float(probe.t[n - 1] - probe.t[0]) if n else 0.0,
-        wall_s=summary.seconds,
+        wall_s=wall_s,
         render_s=render_s,
         passes=drive.passes,
         window_s=window_s,
@@ -574,9 +599,11 @@ def soak(
             (float(a - t0), float(b))
             for a, b in zip(probe.rss_t[: probe.n_rss], probe.rss[: probe.n_rss], strict=True)
         ],
-        alerts=len(summary.alerts),
-        mode_changes=len(summary.mode_changes),
-        source_errors=dict(summary.source_errors),
+        alerts=probe.alerts,
+        mode_changes=probe.mode_changes,
+        source_errors={drive.name: drive.errors},
+        error=error,
+        error_at_s=probe.failed_t - t0 if error else math.nan,
         source_problems=dict(drive.problems),
         fusion_stats=dict(getattr(probe.pipeline.fusion, "stats", {})),
     )
@@ -594,9 +621,10 @@ def format_report(report: SoakReport) -> str:
         f"replayed in {report.wall_s / 60:.1f} min; costs: CPU ms per frame, medians over the "
         f"{win} of drive before each checkpoint"
     )
+    last = "end" if report.error else "100 %"
     rows = [
         [
-            f"{100 * r['fraction']:.0f} %",
+            last if r["fraction"] == CHECKPOINTS[-1] else f"{100 * r['fraction']:.0f} %",
             f"{r['drive_s'] / 60:.1f}",
             f"{r['rss_mb']:.1f}",
             f"{r['gc_objects']:.0f}",
@@ -611,6 +639,11 @@ def format_report(report: SoakReport) -> str:
     )
     c = report.costs
     lines = [head, "", table, ""]
+    if report.error:
+        lines.append(
+            f"THE RUN ENDED EARLY at {report.error_at_s / 60:.2f} min of drive (frame "
+            f"{report.frames + 1}), not {o.minutes:g}: {report.error}"
+        )
     lines.append(
         f"RSS flat within {100 * FLAT_WITHIN:.0f} %: {'yes' if report.rss_flat else 'NO'} "
         f"(spread {100 * report.rss_spread:.1f} % of the RSS at 10 %)"
