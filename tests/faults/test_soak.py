@@ -121,6 +121,10 @@ def test_soak_report_is_complete_and_physically_sane(drive: Recording) -> None:
             assert c[f"{part}_cpu_ms"] <= c[f"{part}_wall_ms"] * 1.05 + TICK_MS
     for r in report.checkpoints:
         assert 0 < r["detector_wall_ms"] <= r["frame_wall_ms"]
+    # one window per second of the 5 s drive, each with the same part <= whole order
+    assert [w["end_s"] for w in report.window_costs] == [1.0, 2.0, 3.0, 4.0, 5.0]
+    for w in report.window_costs:
+        assert 0 < w["detector_wall_ms"] <= w["frame_wall_ms"]
 
 
 def test_an_error_that_ends_the_drive_is_the_reports_finding(

@@ -307,6 +307,27 @@ def window_median(
     return float(np.median(values[sel])) if np.any(sel) else math.nan
 
 
+def window_costs(
+    t: NDArray[np.float64], ms: NDArray[np.float64], window_s: float
+) -> list[dict[str, float]]:
+    """Per consecutive window of ``window_s`` from the first frame: the window's end (s
+    from the first frame) and the median of each cost (`COST_COLUMNS`), ms."""
+    if t.size == 0:
+        return []
+    rel = t - t[0]
+    n_win = max(1, math.ceil(float(rel[-1]) / window_s))
+    which = np.minimum((rel // window_s).astype(np.int64), n_win - 1)  # the last frame: last
+    out = []
+    for k in range(n_win):  # windows, not frames
+        row = {"end_s": (k + 1) * window_s}
+        for name, col in COST_COLUMNS.items():
+            v = ms[which == k, col]
+            v = v[np.isfinite(v)]
+            row[name] = float(np.median(v)) if v.size else math.nan
+        out.append(row)
+    return out
+
+
 def grown_containers(sizes: list[dict[str, int]], *, min_growth: int = 16) -> dict[str, list[int]]:
     """The containers (paths) whose length rose from the second snapshot (50 %) to the
     last by at least ``min_growth`` and never fell in between: path -> lengths per
@@ -343,6 +364,9 @@ class SoakReport:
     grown: dict[str, list[int]]
     window_s: float = WINDOW_S  #: the costs' window of drive time
     rss_series: list[tuple[float, float]] = field(default_factory=list)  #: (drive s, MB)
+    #: per window of drive time (``window_s``, from the first frame): its end (s) and the
+    #: median of each cost (ms): the trend between the checkpoints
+    window_costs: list[dict[str, float]] = field(default_factory=list)
     alerts: int = 0
     mode_changes: int = 0
     source_errors: dict[str, int] = field(default_factory=dict)
@@ -583,6 +607,7 @@ def soak(
     n = min(probe.n, probe.t.size)
     t0 = float(probe.t[0]) if n else math.nan
     return SoakReport(
+        window_costs=window_costs(probe.t[:n], probe.ms[:n], window_s),
         options=options,
         frames=probe.n,
         drive_s=float(probe.t[n - 1] - probe.t[0]) if n else 0.0,
