@@ -161,7 +161,9 @@ def test_bench_soak_writes_its_json_and_reuses_a_cached_drive(
 ) -> None:
     assert BENCHMARKS["soak"] == "roadpreview.bench.soak"
     assert "soak" in LONG  # not in 'bench all'
-    options = SoakOptions(minutes=3 / 60, drives=1, drive_minutes=0.25, fps=30.0, seed=0)
+    options = SoakOptions(
+        minutes=3 / 60, drives=1, drive_minutes=0.25, width=320, height=180, fps=30.0, seed=0
+    )
     shutil.copytree(drive.folder, tmp_path / "cache" / options.key(0))  # nothing to render
     out = tmp_path / "soak.json"
     table = run(

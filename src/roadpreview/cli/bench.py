@@ -36,9 +36,9 @@ def add_subparser(sub: Any) -> None:
         "--drive-minutes", type=float, default=2.0, metavar="MIN", help="minutes of each drive"
     )
     soak.add_argument(
-        "--resolution", default="320x180", metavar="WxH", help="camera size of the drive, px"
+        "--resolution", default="640x360", metavar="WxH", help="camera size of the drive, px"
     )
-    soak.add_argument("--fps", type=float, default=10.0, help="camera frames per second")
+    soak.add_argument("--fps", type=float, default=15.0, help="camera frames per second")
     soak.add_argument(
         "--json", default="soak.json", metavar="PATH", help="where the JSON report goes"
     )
