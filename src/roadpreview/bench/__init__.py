@@ -1,7 +1,8 @@
 """Benchmarks behind ``roadpreview bench``: medians over repeats, ratios from one run.
 
 Each benchmark module exposes ``run(repeats, quick, seed) -> str`` returning
-the printed table. Modules are imported lazily by name.
+the printed table (a benchmark with options of its own takes them as keywords).
+Modules are imported lazily by name.
 """
 
 from __future__ import annotations
@@ -16,12 +17,22 @@ BENCHMARKS: dict[str, str] = {
     "fusion": "roadpreview.bench.fusion",
     "detector": "roadpreview.bench.detector",
     "pipeline": "roadpreview.bench.pipeline",
+    "soak": "roadpreview.bench.soak",
 }
+
+#: not run by ``roadpreview bench all``: they take tens of minutes (the soak's 30 min drive)
+LONG: frozenset[str] = frozenset({"soak"})
 
 
 def run_benchmark(
-    name: str, *, repeats: int | None = None, quick: bool = False, seed: int = 0
+    name: str,
+    *,
+    repeats: int | None = None,
+    quick: bool = False,
+    seed: int = 0,
+    **options: object,
 ) -> str:
-    """Run benchmark ``name`` and return its printed table."""
+    """Run benchmark ``name`` and return its printed table; ``options``: the benchmark's
+    own keywords (the soak's ``minutes``, ``resolution``, ...)."""
     module = importlib.import_module(BENCHMARKS[name])
-    return str(module.run(repeats=repeats, quick=quick, seed=seed))
+    return str(module.run(repeats=repeats, quick=quick, seed=seed, **options))
