@@ -32,7 +32,7 @@ the run.
 out of its iterator is logged (``event=thread_died source=... error=...``), counted
 (``summary.thread_deaths``, and ``thread_died`` / ``restarted`` among the source's
 problems) and the source is iterated again: a live source after a backoff (doubling up
-to ``max_backoff_s``), a file source at once, resuming after the last sample it gave. A
+to ``max_backoff_s``), a file source at once, resuming after the samples it gave. A
 source that dies ``max_restarts`` times in a row (a live one that ran ``healthy_s``
 between two deaths, a file one that got past its last failure, starts the count again)
 ends the run: the sinks are closed with ``summary.error`` set and `SourceFailed`
@@ -193,15 +193,20 @@ class _Supervisor:
         when it dies `Supervision.max_restarts` times in a row."""
         policy = self.policy
         in_row = 0  # deaths since the source last made progress
-        last_t = -math.inf  # the newest sample given (a file source resumes after it)
+        given = 0  # samples given so far (a file source read again resumes after them)
         while True:
             started = time.monotonic()
             progressed = False
             try:
+                # a file source reads the same samples again from its start: skip those
+                # given (by count: one source's samples need not be in time order, e.g.
+                # a calibrated IMU's stamps moved back against the speed's in one CAN log)
+                skip = 0 if source.live else given
                 for sample in source:
-                    if not source.live and sample.t_s <= last_t:
-                        continue  # a file source read again from its start: resume
-                    last_t = max(last_t, sample.t_s)
+                    if skip:
+                        skip -= 1
+                        continue
+                    given += 1
                     progressed = True
                     yield sample
                 return
