@@ -3,8 +3,7 @@
 
 from __future__ import annotations
 
-import logging
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import pytest
@@ -18,11 +17,3 @@ def tiny(make_recording: Callable[..., Recording]) -> Recording:
     """8 s of the demo drive at 640x360 (240 frames, the lead crosses one bump at 6 s)."""
     return make_recording("demo", seed=0, duration_s=8.0, width=640, height=360)
 
-
-@pytest.fixture(autouse=True)
-def _restore_logging() -> Iterator[None]:
-    names = ("", "roadpreview.progress")
-    levels = {n: logging.getLogger(n).level for n in names}
-    yield
-    for n, level in levels.items():
-        logging.getLogger(n).setLevel(level)

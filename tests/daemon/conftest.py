@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import can
 import pytest
 
 from roadpreview.apps.daemon import Daemon, DaemonSummary
@@ -120,3 +121,24 @@ def notify_socket(monkeypatch: pytest.MonkeyPatch) -> Iterator[NotifySocket]:
     yield ns
     ns.close()
     shutil.rmtree(folder, ignore_errors=True)
+
+
+class BusRecorder:
+    """Every frame on a virtual bus channel from now until `close` (a receiver, as a
+    chassis ECU or a logger would sit on the bus)."""
+
+    def __init__(self, channel: str, *, preserve_timestamps: bool = False) -> None:
+        from roadpreview.canbus.live import open_bus
+
+        self.bus = open_bus("virtual", channel, preserve_timestamps=preserve_timestamps)
+        self.reader = can.BufferedReader()
+        self.notifier = can.Notifier(self.bus, [self.reader], timeout=0.02)
+
+    def close(self) -> list[can.Message]:
+        time.sleep(0.1)
+        self.notifier.stop()
+        self.bus.shutdown()
+        out = []
+        while (msg := self.reader.get_message(timeout=0.0)) is not None:
+            out.append(msg)
+        return out

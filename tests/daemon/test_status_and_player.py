@@ -16,6 +16,7 @@ from typing import Any, cast
 
 import can
 import pytest
+from tests.daemon.conftest import BusRecorder
 
 from roadpreview.apps.daemon import (
     Daemon,
@@ -107,22 +108,6 @@ def test_status_line_on_a_short_run(
     assert daemon.monitor.drops == summary.frames_dropped + summary.frames_out_of_order
 
 
-class _Receiver:
-    def __init__(self, channel: str) -> None:
-        self.bus = open_bus("virtual", channel)
-        self.reader = can.BufferedReader()
-        self.notifier = can.Notifier(self.bus, [self.reader], timeout=0.02)
-
-    def close(self) -> list[can.Message]:
-        time.sleep(0.1)
-        self.notifier.stop()
-        self.bus.shutdown()
-        out = []
-        while (msg := self.reader.get_message(timeout=0.0)) is not None:
-            out.append(msg)
-        return out
-
-
 class _Now:
     """A schedule on which every time stamp is due at once (plays as fast as it can)."""
 
@@ -140,7 +125,7 @@ def channel() -> str:
 
 def test_player_restamps_onto_the_anchor_at_recorded_pace(channel: str) -> None:
     recorded = list(read_can_log(FILES / "imu_drive.log"))
-    rx = _Receiver(channel)
+    rx = BusRecorder(channel)
     tx = open_bus("virtual", channel, preserve_timestamps=True)
     anchor = time.time() + 0.2
     player = CanLogPlayer(FILES / "imu_drive.log", tx, anchor_s=anchor)
@@ -168,7 +153,7 @@ def _join(player: CanLogPlayer, timeout_s: float) -> bool:
 
 
 def test_player_loops_with_later_stamps(channel: str) -> None:
-    rx = _Receiver(channel)
+    rx = BusRecorder(channel)
     tx = open_bus("virtual", channel, preserve_timestamps=True)
     player = CanLogPlayer(FILES / "imu_drive.log", tx, anchor_s=0.0, schedule=_Now(), loop=True)
     player.start()
@@ -188,7 +173,7 @@ def test_player_loops_with_later_stamps(channel: str) -> None:
 
 
 def test_player_counts_garbled_frames_and_refused_sends(channel: str) -> None:
-    rx = _Receiver(channel)
+    rx = BusRecorder(channel)
     tx = open_bus("virtual", channel, preserve_timestamps=True)
     player = CanLogPlayer(FILES / "garbled.asc", tx, schedule=_Now())
     player.start()

@@ -21,10 +21,10 @@ from typing import TYPE_CHECKING, Any
 
 import can
 import pytest
+from tests.daemon.conftest import BusRecorder
 
 from roadpreview.apps.daemon import Daemon, DaemonOptions, DaemonSummary
 from roadpreview.canbus import read_can_log
-from roadpreview.canbus.live import open_bus
 from roadpreview.canbus.logio import CanLogWriter
 from roadpreview.canbus.output import OutputDecoder, ReceivedStatus
 from roadpreview.cli.main import main
@@ -63,24 +63,6 @@ class Played:
     def modes(self) -> list[tuple[float, FusionMode]]:
         """(seconds from frame 0, mode) of every status received."""
         return [(self.rel(s.t_rx_s), s.mode) for s in self.statuses]
-
-
-class _Receiver:
-    """Every frame on the channel, with the sender's time stamps."""
-
-    def __init__(self, channel: str) -> None:
-        self.bus = open_bus("virtual", channel, preserve_timestamps=True)
-        self.reader = can.BufferedReader()
-        self.notifier = can.Notifier(self.bus, [self.reader], timeout=0.02)
-
-    def close(self) -> list[can.Message]:
-        time.sleep(0.1)
-        self.notifier.stop()
-        self.bus.shutdown()
-        out = []
-        while (msg := self.reader.get_message(timeout=0.0)) is not None:
-            out.append(msg)
-        return out
 
 
 def _edited_log(drive: Recording, folder: Path, edit: Callable[[list[can.Message]], Any]) -> Path:
@@ -138,7 +120,7 @@ def _play(
         video_start_s=drive.t0_unix_s,
         stop_at_end=stop_after_s is None,
     )
-    rx = _Receiver(channel)
+    rx = BusRecorder(channel, preserve_timestamps=True)
     daemon = Daemon(drive.camera, cfg, options)
     if patch is not None:
         patch(daemon)

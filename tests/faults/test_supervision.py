@@ -253,15 +253,6 @@ def drive(make_recording: Callable[..., Recording]) -> Recording:
     return make_recording("controlled", seed=0, duration_s=3.0, width=320, height=180)
 
 
-@pytest.fixture(autouse=True)
-def _restore_logging() -> Iterator[None]:
-    names = ("", "roadpreview.progress")
-    levels = {n: logging.getLogger(n).level for n in names}
-    yield
-    for n, level in levels.items():
-        logging.getLogger(n).setLevel(level)
-
-
 def _replay(drive: Recording, out: Path, *extra: str) -> tuple[int, dict[str, Any], list[Any]]:
     """``roadpreview replay`` of the drive's video (its calibration and clock) with the
     ``extra`` inputs: exit code, summary.json, the alerts as (id, crossing time, height)."""
