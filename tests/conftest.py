@@ -120,7 +120,9 @@ def _log_levels_at_start() -> dict[str, int]:
 
     from roadpreview.cli.main import PROGRESS_LOGGER
 
-    return {n: logging.getLogger(n).level for n in ("", PROGRESS_LOGGER)}
+    # the root (``main`` sets it), the progress logger, and the package's (the benchmarks
+    # turn it down to errors while they measure)
+    return {n: logging.getLogger(n).level for n in ("", PROGRESS_LOGGER, "roadpreview")}
 
 
 @pytest.fixture(autouse=True)
