@@ -3,7 +3,8 @@
 A thin composition of the run loop: file sources (a recording folder in one argument,
 or a video with an optional ``frames.csv``, CAN logs and/or an IMU CSV) -> `Pipeline`
 -> file sinks, all in one output folder: ``alerts.blf`` (RP_ALERT, RP_ALERT_DETAIL,
-RP_CONFIRM, RP_STATUS, RP_ROAD_STATUS), ``alerts.jsonl``, ``frames.csv``,
+RP_ALERT_END, RP_CONFIRM, RP_STATUS, RP_ROAD_STATUS, RP_INPUT_STATUS), ``alerts.jsonl``,
+``frames.csv``,
 ``plots.png``, ``summary.json`` and optionally ``annotated.mp4``. The sinks stream, so
 an interrupt (``stop``, set by SIGINT/SIGTERM in the CLI) keeps every alert emitted so
 far; the summary then says ``"interrupted": true``.

@@ -95,8 +95,8 @@ def _run(args: argparse.Namespace) -> int:
     print("\nfusion modes:")
     print(format_modes(result.mode_changes, result.video_start_s))
     print(
-        f"\noutputs: {out / 'alerts.blf'} (RP_ALERT, RP_ALERT_DETAIL, RP_CONFIRM, RP_STATUS, "
-        f"RP_ROAD_STATUS), {out / 'alerts.jsonl'},"
+        f"\noutputs: {out / 'alerts.blf'} (RP_ALERT, RP_ALERT_DETAIL, RP_ALERT_END, RP_CONFIRM,"
+        f" RP_STATUS, RP_ROAD_STATUS, RP_INPUT_STATUS), {out / 'alerts.jsonl'},"
     )
     print(f"         {out / 'frames.csv'}, {out / 'plots.png'}, {out / 'summary.json'}")
     print(
