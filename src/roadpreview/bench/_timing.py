@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import logging
 import statistics
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 
 def median_seconds(fn: Callable[[], object], repeats: int) -> float:
@@ -30,3 +32,17 @@ def format_table(header: list[str], rows: list[list[str]]) -> str:
 
     sep = "-+-".join("-" * w for w in widths)
     return "\n".join([line(header), sep, *(line(r) for r in rows)])
+
+
+@contextmanager
+def package_logs_at_errors() -> Iterator[None]:
+    """roadpreview's log turned down to errors while a benchmark measures (thousands of
+    frames of warnings), and put back afterwards: a benchmark run from a test or another
+    command must not silence what comes after it."""
+    logger = logging.getLogger("roadpreview")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)

@@ -9,7 +9,6 @@ no files written), medians over repeats, and their ratio.
 
 from __future__ import annotations
 
-import logging
 import statistics
 import tempfile
 import time
@@ -18,7 +17,7 @@ from pathlib import Path
 
 import cv2
 
-from roadpreview.bench._timing import format_table
+from roadpreview.bench._timing import format_table, package_logs_at_errors
 
 SIZES = ((1280, 720), (1920, 1080))
 
@@ -43,8 +42,7 @@ def run(repeats: int | None = None, quick: bool = False, seed: int = 0) -> str:
     repeats = repeats or (1 if quick else 3)
     seconds = 4.0 if quick else 10.0
     rows: list[list[str]] = []
-    logging.getLogger("roadpreview").setLevel(logging.ERROR)
-    with tempfile.TemporaryDirectory() as tmp:
+    with package_logs_at_errors(), tempfile.TemporaryDirectory() as tmp:
         for w, h in SIZES:
             cfg = drive_config("demo", seed, duration_s=seconds, width=w, height=h)
             cfg = replace(cfg, output=replace(cfg.output, imu_csv=False))

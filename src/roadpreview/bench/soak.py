@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from roadpreview.bench._timing import format_table
+from roadpreview.bench._timing import format_table, package_logs_at_errors
 from roadpreview.errors import ConfigError
 from roadpreview.pipeline.pipeline import FrameResult, Pipeline
 from roadpreview.sources import Source
@@ -723,8 +723,7 @@ def run(
         seed=seed,
     )
     options.validate()
-    logging.getLogger("roadpreview").setLevel(logging.ERROR)  # 27,000 frames of warnings
-    with _cache_dir(cache) as base:
+    with package_logs_at_errors(), _cache_dir(cache) as base:  # 27,000 frames of warnings
         folders, render_s = render_drives(options, base)
         report = soak(folders, options=options, render_s=render_s)
     if json_path is not None:
