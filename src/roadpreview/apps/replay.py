@@ -211,6 +211,51 @@ class ReplayInputs:
         return camera, [s if s is camera else ClockGuard(s) for s in sources]
 
 
+def drive_inputs(
+    path: Path,
+    *,
+    camera: Path | None = None,
+    can_logs: Sequence[Path] = (),
+    imu_csv: Path | None = None,
+    frames_csv: Path | None = None,
+    video_start_s: float | None = None,
+    can_offset_s: float | None = None,
+    imu_offset_s: float | None = None,
+    image_topic: str | None = None,
+    imu_topic: str | None = None,
+    speed_topic: str | None = None,
+    truth: bool = False,
+) -> ReplayInputs:
+    """The drive at ``path`` (a recording folder, a video or a ROS bag) with its companion
+    inputs, as ``roadpreview replay`` and ``roadpreview batch`` take them; truth events
+    are kept only with ``truth`` (a recording folder's)."""
+    path = Path(path)
+    if not path.exists():
+        raise InputDataError(f"{path}: no such recording folder, video or bag")
+    if path.is_dir() and not is_bag(path):
+        inputs = ReplayInputs.from_recording(path)
+        if not truth:
+            inputs.truth_events = None
+        return inputs
+    if camera is None:
+        raise ConfigError(f"--camera: a camera calibration is needed for {path}")
+    if truth:
+        raise ConfigError(f"{path}: --truth needs a simulator recording folder")
+    return ReplayInputs(
+        video=path,
+        camera=CameraModel.load(camera),
+        can_logs=list(can_logs),
+        imu_csv=imu_csv,
+        frames_csv=frames_csv,
+        video_start_s=video_start_s,
+        image_topic=image_topic,
+        imu_topic=imu_topic,
+        speed_topic=speed_topic,
+        can_offset_s=can_offset_s,
+        imu_offset_s=imu_offset_s,
+    )
+
+
 @dataclass
 class ReplayResult:
     """What a replay did (`RunSummary` plus the replay's own findings)."""

@@ -74,33 +74,19 @@ def add_input_arguments(p: argparse.ArgumentParser, *, camera_required: bool = F
 
 def inputs_from_args(args: argparse.Namespace, *, truth: bool = False) -> ReplayInputs:
     """The drive the arguments describe (truth events kept only with ``truth``)."""
-    from roadpreview.apps.replay import ReplayInputs
-    from roadpreview.camera import CameraModel
-    from roadpreview.errors import ConfigError, InputDataError
-    from roadpreview.sources.rosbag import is_bag
+    from roadpreview.apps.replay import drive_inputs
 
-    path: Path = args.input
-    if not path.exists():
-        raise InputDataError(f"{path}: no such recording folder, video or bag")
-    if path.is_dir() and not is_bag(path):
-        inputs = ReplayInputs.from_recording(path)
-        if not truth:
-            inputs.truth_events = None
-        return inputs
-    if args.camera is None:
-        raise ConfigError(f"--camera: a camera calibration is needed for {path}")
-    if truth:
-        raise ConfigError("--truth needs a simulator recording folder")
-    return ReplayInputs(
-        video=path,
-        camera=CameraModel.load(args.camera),
+    return drive_inputs(
+        args.input,
+        camera=args.camera,
         can_logs=list(args.can),
         imu_csv=args.imu_csv,
         frames_csv=args.frames_csv,
         video_start_s=args.video_start,
+        can_offset_s=args.can_offset,
+        imu_offset_s=args.imu_offset,
         image_topic=args.image_topic,
         imu_topic=args.imu_topic,
         speed_topic=args.speed_topic,
-        can_offset_s=args.can_offset,
-        imu_offset_s=args.imu_offset,
+        truth=truth,
     )

@@ -19,7 +19,6 @@ task, one thread per worker.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import math
@@ -40,6 +39,7 @@ from roadpreview import __version__
 from roadpreview.anomaly.base import TrajectorySample
 from roadpreview.camera import CameraModel
 from roadpreview.configtools import to_mapping
+from roadpreview.digests import digest, source_digest
 from roadpreview.errors import InputDataError, OperationError
 from roadpreview.eval.methods import REFERENCE_METHOD, MethodSpec, NanStdFallback, method_config
 from roadpreview.pipeline.config import PipelineConfig
@@ -54,35 +54,14 @@ Array = NDArray[np.float64]
 
 #: bump when the trace layout or the way traces are produced changes
 TRACE_FORMAT = 4
-_PACKAGE = Path(__file__).resolve().parents[1]
 #: sub-packages and modules whose source does not change what a trace holds (the detectors
 #: run on the stored trajectory afterwards; the sinks only write files; the apps compose)
-_NOT_PIPELINE = ("eval", "cli", "bench", "sim", "anomaly", "sinks", "apps")
+_NOT_PIPELINE = ("eval", "cli", "bench", "sim", "anomaly", "sinks", "apps", "batch")
 
 
 # -- digests ------------------------------------------------------------------------------------
-def _digest(obj: Any) -> str:
-    text = json.dumps(obj, sort_keys=True, default=str, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-@cache
-def _source_digest(parts: tuple[str, ...], exclude: tuple[str, ...] = ()) -> str:
-    """Digest of the package's source files under ``parts`` (``("",)``: all), minus
-    ``exclude`` (top-level names or paths relative to the package); data files (DBC,
-    mappings) included."""
-    h = hashlib.sha256(__version__.encode())
-    for part in parts:
-        root = _PACKAGE / part
-        for path in [root] if root.is_file() else sorted(root.rglob("*")):
-            rel = path.relative_to(_PACKAGE)
-            if not path.is_file() or path.suffix not in (".py", ".dbc", ".toml"):
-                continue
-            if rel.parts and (rel.parts[0] in exclude or rel.as_posix() in exclude):
-                continue
-            h.update(str(rel).encode())
-            h.update(path.read_bytes())
-    return h.hexdigest()[:16]
+_digest = digest
+_source_digest = source_digest
 
 
 def pipeline_source_digest() -> str:
