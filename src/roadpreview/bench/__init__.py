@@ -18,10 +18,12 @@ BENCHMARKS: dict[str, str] = {
     "detector": "roadpreview.bench.detector",
     "pipeline": "roadpreview.bench.pipeline",
     "soak": "roadpreview.bench.soak",
+    "batch": "roadpreview.bench.batch",
 }
 
-#: not run by ``roadpreview bench all``: they take tens of minutes (the soak's 30 min drive)
-LONG: frozenset[str] = frozenset({"soak"})
+#: not run by ``roadpreview bench all``: they take many minutes (the soak's 30 min drive;
+#: the batch's eight 720p drives, replayed three ways, three times)
+LONG: frozenset[str] = frozenset({"soak", "batch"})
 
 
 def run_benchmark(

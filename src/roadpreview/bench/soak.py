@@ -34,7 +34,6 @@ import itertools
 import json
 import logging
 import math
-import multiprocessing
 import os
 import resource
 import tempfile
@@ -42,7 +41,6 @@ import time
 from array import array
 from collections import Counter, deque
 from collections.abc import Callable, Iterator, Mapping
-from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -546,23 +544,34 @@ def drive_config(options: SoakOptions, index: int) -> Any:
     return replace(cfg, camera=camera, output=replace(cfg.output, imu_csv=False))
 
 
-def _render(cfg: Any, folder: str) -> float:
+def _render_one(item: tuple[Any, str]) -> float:
+    """Render one drive (a task on the engine); its rendering seconds."""
     from roadpreview.sim.recording import write_recording
 
+    cfg, folder = item
     return write_recording(cfg, folder).seconds
 
 
 def render_drives(options: SoakOptions, base: Path) -> tuple[list[Path], float]:
-    """The soak's drives in ``base`` (rendered in child processes, two at a time, unless
-    already there) and the CPU-bound seconds spent rendering (summed over the drives)."""
+    """The soak's drives in ``base`` (rendered on a local Dask cluster, two at a time,
+    unless already there) and the CPU-bound seconds spent rendering (summed over the drives)."""
     folders = [base / options.key(i) for i in range(options.drives)]
     todo = [(i, f) for i, f in enumerate(folders) if not (f / "truth.json").is_file()]
     if not todo:
         return folders, 0.0
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(2, len(todo)), mp_context=ctx) as pool:
-        jobs = [pool.submit(_render, drive_config(options, i), str(f)) for i, f in todo]
-        return folders, float(sum(j.result() for j in jobs))
+    from roadpreview.batch.engine import TaskFailure, open_engine
+
+    items = [(drive_config(options, i), str(f)) for i, f in todo]
+    seconds = 0.0
+    with open_engine(workers=min(2, len(todo)), dashboard=False) as engine:
+        keys = [Path(f).name for _, f in items]
+        for (_, folder), result in engine.map(
+            _render_one, items, keys=keys, label="soak-render", progress=False
+        ):
+            if isinstance(result, TaskFailure):
+                raise RuntimeError(f"{folder}: rendering failed: {result.message}")
+            seconds += result
+    return folders, seconds
 
 
 def soak(

@@ -28,6 +28,7 @@ COMMANDS: dict[str, str] = {
     "demo": "roadpreview.cli.demo",
     "simulate": "roadpreview.cli.simulate",
     "replay": "roadpreview.cli.replay",
+    "batch": "roadpreview.cli.batch",
     "run": "roadpreview.cli.run",
     "bench": "roadpreview.cli.bench",
     "evaluate": "roadpreview.cli.evaluate",

@@ -19,13 +19,13 @@ import json
 import logging
 import math
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from roadpreview.errors import OperationError
 from roadpreview.sim.presets import preset
 from roadpreview.sim.recording import write_recording
 from roadpreview.sim.scenario import CameraSpec, ScenarioConfig
@@ -230,9 +230,22 @@ def build_dataset(
     done = n_drives - len(todo)
     if progress:
         progress(done, n_drives)
-    if todo:
-        with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-            for _ in pool.map(_write_one, todo):
+    if todo and jobs <= 1:
+        for item in todo:
+            _write_one(item)
+            done += 1
+            if progress:
+                progress(done, n_drives)
+    elif todo:  # on the batch's engine: a local Dask cluster of `jobs` processes
+        from roadpreview.batch.engine import TaskFailure, open_engine
+
+        with open_engine(workers=jobs, dashboard=False) as engine:
+            keys = [Path(folder).name for _, folder in todo]
+            for item, result in engine.map(
+                _write_one, todo, keys=keys, label="simulate", progress=False
+            ):
+                if isinstance(result, TaskFailure):
+                    raise OperationError(f"{item[1]}: the simulation failed: {result.message}")
                 done += 1
                 if progress:
                     progress(done, n_drives)
