@@ -40,7 +40,7 @@ def fleet(
 ) -> Path:
     """Four short simulated drives as a folder of recordings (links to the session's)."""
     recs = {
-        "a_demo": make_recording("demo", seed=0, duration_s=8.0, width=640, height=360),
+        "a_demo": make_recording("demo", seed=0, duration_s=8.0, width=1280, height=720),
         "b_controlled": make_recording("controlled", seed=0, duration_s=3.0, width=320, height=180),
         "c_demo": make_recording("demo", seed=1, duration_s=4.0, width=320, height=180),
         "d_controlled": make_recording("controlled", seed=1, duration_s=3.0, width=320, height=180),

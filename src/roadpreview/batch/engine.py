@@ -237,7 +237,9 @@ def open_engine(
     if n < 1:
         raise ConfigError(f"--workers {n}: need at least 1")
     env = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **PINNED_ENV}
-    board = ":0" if dashboard and importlib.util.find_spec("bokeh") is not None else None
+    # the scheduler's HTTP server (metrics, and the dashboard when bokeh is installed) on a
+    # free port: a second batch, or an evaluation, on the same machine must not collide
+    board = ":0"
     with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
         cluster = distributed.LocalCluster(
             n_workers=n,
@@ -245,6 +247,7 @@ def open_engine(
             processes=True,
             memory_limit=memory_limit,
             dashboard_address=board,
+            scheduler_kwargs={"dashboard": dashboard},
             silence_logs=logging.ERROR,
         )
     client = distributed.Client(cluster)
