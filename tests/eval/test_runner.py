@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from roadpreview.apps.replay import ReplayInputs, replay
-from roadpreview.errors import ConfigError
+from roadpreview.errors import ConfigError, OperationError
 from roadpreview.eval.clips import (
     SCORE_WINDOW_S,
     Scores,
@@ -27,7 +27,9 @@ from roadpreview.eval.methods import METHODS, method_config, select_methods
 from roadpreview.eval.runner import (
     MethodSet,
     RecordingJob,
+    RecordingOutcome,
     load_traces,
+    process_all,
     process_recording,
     run_methods,
 )
@@ -305,3 +307,52 @@ def test_traces_are_cached_and_reused(tmp_path: Path, monkeypatch: pytest.Monkey
     assert set(third.methods_run) == {"uncompensated", "fused-kalman"}
     assert len(list(job.trace_dir.glob("uncompensated-*.npz"))) == 1  # the stale one is gone
     assert math.isfinite(third.fps)
+
+
+@pytest.mark.slow
+def test_the_engine_gives_the_serial_traces(tmp_path: Path) -> None:
+    """Two recordings as tasks on a local Dask cluster of two single-thread workers: the
+    same traces, to the bit, as run one after the other in this process; a task that
+    fails is an error naming its recording."""
+    from roadpreview.batch.engine import open_engine
+
+    def tiny(seed: int) -> RecordingJob:
+        cfg = controlled(seed, gap_m=8.0)
+        cfg = replace(
+            cfg,
+            motion=replace(cfg.motion, duration_s=1.5),
+            camera=replace(cfg.camera, width=320, height=180),
+        )
+        return RecordingJob("controlled", f"tiny-{seed}", cfg, tmp_path)
+
+    jobs = [tiny(0), tiny(1)]
+    methods = MethodSet.build(PipelineConfig(), select_methods(["uncompensated", "fused-kalman"]))
+    process_all(jobs, methods)
+    serial = [load_traces(j, methods) for j in jobs]
+
+    seen: list[tuple[int, int, str]] = []
+
+    def progress(n: int, total: int, o: RecordingOutcome) -> None:
+        seen.append((n, total, o.key))
+
+    with open_engine(workers=2, memory_limit=None, dashboard=False) as engine:
+        outcomes = process_all(jobs, methods, engine=engine, fresh=True, progress=progress)
+        assert [o.key for o in outcomes] == [j.key for j in jobs]
+        assert all(
+            o.generate_s == 0.0 and set(o.methods_run) == set(methods.configs) for o in outcomes
+        )  # the recordings reused, every trace made again
+        assert [(n, total) for n, total, _ in seen] == [(1, 2), (2, 2)]
+        assert {k for _, _, k in seen} == {j.key for j in jobs}
+        for job, before in zip(jobs, serial, strict=True):
+            after = load_traces(job, methods)
+            for m, tr in before.items():
+                assert set(after[m].columns) == set(tr.columns)
+                for col, values in tr.columns.items():
+                    assert np.array_equal(
+                        after[m][col], values, equal_nan=values.dtype.kind == "f"
+                    ), (job.key, m, col)
+
+        (tmp_path / "not-a-folder").write_text("")
+        broken = RecordingJob("controlled", "broken", jobs[0].scenario, tmp_path / "not-a-folder")
+        with pytest.raises(OperationError, match="controlled/broken"):
+            process_all([broken], methods, engine=engine)

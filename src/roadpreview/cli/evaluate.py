@@ -1,5 +1,7 @@
 """``roadpreview evaluate``: every method over the same simulated recordings, the paper's
-experiments and ours, and the report (``docs/evaluation.md``)."""
+experiments and ours, and the report (``docs/evaluation.md``). The recordings run as
+tasks on the Dask engine ``roadpreview batch`` uses: a local cluster of ``--jobs``
+processes, or an existing cluster (``--scheduler``)."""
 
 from __future__ import annotations
 
@@ -38,7 +40,15 @@ def add_subparser(sub: Any) -> None:
     p.add_argument(
         "--report", type=Path, default=None, metavar="FILE", help="write the Markdown report here"
     )
-    p.add_argument("--jobs", type=int, default=2, help="worker processes")
+    p.add_argument("--jobs", type=int, default=2, help="local worker processes (one thread each)")
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="use an existing Dask cluster, e.g. tcp://host:8786; default: Dask's"
+        " scheduler-address config / DASK_SCHEDULER_ADDRESS, else a local cluster of --jobs"
+        " worker processes",
+    )
     p.add_argument(
         "--experiments",
         default="all",
@@ -76,6 +86,7 @@ def _run(args: argparse.Namespace) -> int:
         out,
         experiments=experiments,
         jobs=args.jobs,
+        scheduler=args.scheduler,
         base_config=base,
         fresh=args.fresh,
         progress=say,

@@ -13,8 +13,9 @@ source of the modules that produce it: a second run reuses it.
 
 Recordings are simulated on demand (deterministic by seed, reused when their
 scenario and the simulator's source are unchanged). Work is parallel over
-recordings in worker processes, one recording (generation + all methods) per
-task, one thread per worker.
+recordings on the Dask engine of ``roadpreview batch`` (`roadpreview.batch.engine`:
+a local cluster of single-thread worker processes, or an existing cluster), one
+recording (generation + all methods) per task.
 """
 
 from __future__ import annotations
@@ -24,13 +25,11 @@ import logging
 import math
 import os
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Callable, Generator, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from functools import cache
-from multiprocessing import get_context
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,6 +46,9 @@ from roadpreview.pipeline.pipeline import FrameResult, Pipeline
 from roadpreview.pitch import PitchEstimator, make_estimator
 from roadpreview.sim.scenario import ScenarioConfig
 from roadpreview.types import Alert, CameraFrame, FusionMode, Sample, Status
+
+if TYPE_CHECKING:  # the engine imports Dask: only where it runs
+    from roadpreview.batch.engine import Engine
 
 log = logging.getLogger(__name__)
 
@@ -530,59 +532,79 @@ def load_traces(job: RecordingJob, methods: MethodSet) -> dict[str, Trace]:
     return out
 
 
-def _worker_init() -> None:
-    """One thread per worker: the pool already uses the cores."""
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[var] = "1"
-    import cv2
-
-    cv2.setNumThreads(1)
-    logging.getLogger("roadpreview").setLevel(logging.ERROR)
+def _evaluation_task(
+    job: RecordingJob, methods: MethodSet, *, fresh: bool = False
+) -> RecordingOutcome:
+    """`process_recording` as an engine task: the package logs errors only meanwhile (a
+    worker's warnings would interleave on the scheduler's terminal with nobody to read
+    them; the outcome carries what the run needs) and its level is put back afterwards."""
+    pkg = logging.getLogger("roadpreview")
+    level = pkg.level
+    pkg.setLevel(logging.ERROR)
+    try:
+        return process_recording(job, methods, fresh=fresh)
+    finally:
+        pkg.setLevel(level)
 
 
 def process_all(
     jobs: Sequence[RecordingJob],
     methods: MethodSet,
     *,
-    workers: int = 2,
+    engine: Engine | None = None,
+    workers: int = 1,
     fresh: bool = False,
     progress: Callable[[int, int, RecordingOutcome], None] | None = None,
 ) -> list[RecordingOutcome]:
-    """`process_recording` for every job, longest first, in ``workers`` processes
-    (in this process when ``workers`` is 1). Returns the outcomes in the jobs' order."""
+    """`process_recording` for every job, longest first; returns the outcomes in the jobs'
+    order. With an ``engine``: one Dask task per recording there (`roadpreview batch`'s
+    execution path). Without one: in this process, one job after the other, when
+    ``workers`` is 1; else on a local engine of ``workers`` processes opened for the call.
+
+    ``progress(n, total, outcome)`` is called as each recording completes; when it is
+    given, the engine's own progress (Dask's bar, periodic log lines) is left off so that
+    one line per recording is all that is printed. A recording whose task failed (it
+    raised, or its worker kept dying) is an `OperationError`: every experiment needs every
+    recording."""
     keys = [j.key for j in jobs]
     if len(set(keys)) != len(keys):
         raise InputDataError("process_all: two jobs share a recording folder")
     order = sorted(range(len(jobs)), key=lambda i: -jobs[i].cost)
     outcomes: dict[int, RecordingOutcome] = {}
-    if workers <= 1:
+    if engine is None and workers <= 1:
         for n, i in enumerate(order, start=1):
             outcomes[i] = process_recording(jobs[i], methods, fresh=fresh)
             if progress:
                 progress(n, len(jobs), outcomes[i])
         return [outcomes[i] for i in range(len(jobs))]
-    # the environment is inherited by the spawned workers before numpy loads there
-    saved = {v: os.environ.get(v) for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
-    for v in saved:
-        os.environ[v] = "1"
+    if engine is None:
+        from roadpreview.batch.engine import open_engine
+
+        with open_engine(workers=workers) as local:
+            return process_all(jobs, methods, engine=local, fresh=fresh, progress=progress)
+    from roadpreview.batch.engine import TaskFailure
+
+    index = {j.key: i for i, j in enumerate(jobs)}
+    ordered = [jobs[i] for i in order]
+    done = engine.map(
+        _evaluation_task,
+        ordered,
+        keys=[j.key.replace("/", ":") for j in ordered],
+        label="evaluate",
+        progress=progress is None,
+        methods=methods,
+        fresh=fresh,
+    )
     try:
-        with ProcessPoolExecutor(
-            max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init
-        ) as pool:
-            futures = {
-                pool.submit(process_recording, jobs[i], methods, fresh=fresh): i for i in order
-            }
-            for n, fut in enumerate(as_completed(futures), start=1):
-                i = futures[fut]
-                outcomes[i] = fut.result()
-                if progress:
-                    progress(n, len(jobs), outcomes[i])
+        for n, (job, result) in enumerate(done, start=1):
+            if isinstance(result, TaskFailure):
+                raise OperationError(f"evaluate: recording {job.key} failed: {result.message}")
+            outcomes[index[job.key]] = result
+            if progress:
+                progress(n, len(jobs), result)
     finally:
-        for v, old in saved.items():
-            if old is None:
-                os.environ.pop(v, None)
-            else:
-                os.environ[v] = old
+        if isinstance(done, Generator):  # an early failure: release the tasks still queued
+            done.close()
     return [outcomes[i] for i in range(len(jobs))]
 
 

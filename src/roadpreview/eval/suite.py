@@ -2,6 +2,9 @@
 experiments, write ``results.json`` (and the report, `roadpreview.eval.report`).
 
     results = run_evaluation(EvalPlan.quick(), "runs/eval-quick", jobs=2)
+
+The recordings run on the Dask engine `roadpreview batch` uses (`roadpreview.batch.engine`):
+a local cluster of ``jobs`` worker processes, or an existing cluster (``scheduler``).
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from roadpreview import __version__
 from roadpreview.configtools import from_mapping, to_mapping
@@ -28,6 +31,9 @@ from roadpreview.eval.runner import MethodSet, RecordingOutcome, process_all
 from roadpreview.fusion import BACKENDS
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pitch import ESTIMATORS
+
+if TYPE_CHECKING:  # the engine imports Dask: only where it runs
+    from roadpreview.batch.engine import Engine
 
 Progress = Callable[[str], None]
 
@@ -104,6 +110,30 @@ def _git_commit() -> str | None:
     return rev + ("+dirty" if dirty else "") if rev else None
 
 
+def _open_engine(scheduler: str | None, jobs: int) -> Engine | None:
+    """The engine of the run: the cluster at ``scheduler`` or at Dask's configured
+    ``scheduler-address`` (``jobs`` does not apply there), else a local cluster of ``jobs``
+    workers; None (this process) for one job and no cluster."""
+    import dask
+
+    from roadpreview.batch.engine import open_engine
+
+    address = scheduler or dask.config.get("scheduler-address", None)
+    if address:
+        return open_engine(str(address))
+    if jobs > 1:
+        return open_engine(workers=jobs)
+    return None
+
+
+def _worker_count(engine: Engine) -> int:
+    """The workers the recordings ran on: a local cluster's own, an existing cluster's at
+    the end of the run (workers may have joined since it was connected)."""
+    if engine.local:
+        return engine.workers
+    return len(engine.client.scheduler_info().get("workers", {})) or engine.workers
+
+
 def parse_experiments(text: str | None) -> tuple[str, ...]:
     """``"e1,e4"`` -> ("e1", "e4"); None or "all": every experiment."""
     if not text or text == "all":
@@ -121,12 +151,18 @@ def run_evaluation(
     *,
     experiments: Sequence[str] = EXPERIMENTS,
     jobs: int = 2,
+    scheduler: str | None = None,
     base_config: PipelineConfig | None = None,
     methods: Sequence[str] | None = None,
     fresh: bool = False,
     progress: Progress | None = None,
 ) -> EvalResults:
-    """Simulate and process the recordings the experiments need, run them, save results."""
+    """Simulate and process the recordings the experiments need, run them, save results.
+
+    The recordings run as tasks on the Dask engine of ``roadpreview batch``: the cluster at
+    ``scheduler`` (or Dask's ``scheduler-address`` setting) when there is one, else a local
+    cluster of ``jobs`` single-thread processes; with ``jobs`` 1 and no cluster, in this
+    process. The engine is closed once the recordings are done (the experiments run here)."""
     t_start = time.perf_counter()
     require_sklearn()  # before the long part: the experiments' ROC, AUC and folds need it
     plan.validate()
@@ -143,7 +179,7 @@ def run_evaluation(
     all_jobs = [j for js in job_sets.values() for j in js]
     say(
         f"{len(all_jobs)} recordings ({', '.join(f'{k}: {len(v)}' for k, v in job_sets.items())}),"
-        f" {len(mset.configs)} methods, {jobs} worker(s)"
+        f" {len(mset.configs)} methods"
     )
 
     def on_done(n: int, total: int, o: RecordingOutcome) -> None:
@@ -155,7 +191,17 @@ def run_evaluation(
         say(f"[{n}/{total}] {o.key}: {o.frames} frames, " + (", ".join(parts) or "cached"))
 
     t_proc = time.perf_counter()
-    outcomes = process_all(all_jobs, mset, workers=jobs, fresh=fresh, progress=on_done)
+    engine = _open_engine(scheduler, jobs)
+    if engine is None:
+        say("in this process (one job, no cluster)")
+        workers, where = 1, "in-process"
+        outcomes = process_all(all_jobs, mset, fresh=fresh, progress=on_done)
+    else:
+        with engine:
+            where = engine.describe()
+            say(where)
+            outcomes = process_all(all_jobs, mset, engine=engine, fresh=fresh, progress=on_done)
+            workers = _worker_count(engine)
     proc_s = time.perf_counter() - t_proc
 
     data = EvalData(plan=plan, methods=mset, jobs=job_sets)
@@ -224,7 +270,8 @@ def run_evaluation(
             "wall_s": time.perf_counter() - t_start,
             "processing_wall_s": proc_s,
             "experiments_wall_s": exp_s,
-            "workers": jobs,
+            "workers": workers,
+            "engine": where,
             "frames_simulated": frames_gen,
             "frames_evaluated": frames_eval,
             "simulate_wall_s": sum(o.generate_s for o in outcomes),
