@@ -17,10 +17,10 @@ from typing import TYPE_CHECKING, Any
 import pyarrow.parquet as pq
 import pytest
 
-from roadpreview.batch.fleet import BatchResult, run_batch
 from roadpreview.apps.replay import ReplayInputs, replay
 from roadpreview.batch.drive import BatchSettings, run_drive
 from roadpreview.batch.engine import Engine, open_engine
+from roadpreview.batch.fleet import BatchResult, run_batch
 from roadpreview.batch.manifest import DriveSpec, discover, read_manifest
 from roadpreview.cli.main import main
 from roadpreview.digests import replay_source_digest
@@ -123,8 +123,8 @@ def test_resume_rules(fleet: Path, first_run: BatchResult, tmp_path: Path) -> No
     assert run_drive(spec, settings).status == "done"
     os.utime(copy / "can.blf", ns=(time.time_ns(), time.time_ns() + 10**9))  # same content
     assert run_drive(spec, settings).status == "skipped"
-    with (copy / "truth.json").open("a") as fh:  # content changed
-        fh.write(" ")
+    with (copy / "camera.toml").open("a") as fh:  # content changed
+        fh.write("# checked again\n")
     assert run_drive(spec, settings).status == "done"
     assert run_drive(spec, settings).status == "skipped"
     cfg = PipelineConfig()
@@ -155,11 +155,13 @@ def _broken_fleet(fleet: Path, folder: Path) -> Path:
 
 
 def test_failed_drives_are_reported_and_the_others_complete(
-    fleet: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    fleet: Path, engine: Engine, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """The command line, on the running cluster (``--scheduler``)."""
     broken = _broken_fleet(fleet, tmp_path / "broken")
     out = tmp_path / "out"
-    code = main(["batch", str(broken), "--out", str(out), "--workers", "2", "-q"])
+    on_cluster = ["--scheduler", engine.address, "-q"]
+    code = main(["batch", str(broken), "--out", str(out), *on_cluster])
     assert code == 1, "some drives failed: the exit code must say so"
     rows = {r["drive"]: r for r in pq.read_table(out / "drives.parquet").to_pylist()}
     assert rows["good"]["status"] == "done"
@@ -174,7 +176,7 @@ def test_failed_drives_are_reported_and_the_others_complete(
     assert "drive truncated_video failed" in err
     assert "drive corrupt_can failed" in err
     # the failed drives are tried again on the next run, the good one is skipped
-    assert main(["batch", str(broken), "--out", str(out), "--workers", "1", "-q"]) == 1
+    assert main(["batch", str(broken), "--out", str(out), *on_cluster]) == 1
     rows = {r["drive"]: r for r in pq.read_table(out / "drives.parquet").to_pylist()}
     assert rows["good"]["status"] == "skipped"
     assert rows["corrupt_can"]["status"] == "failed"
@@ -200,11 +202,13 @@ def test_a_killed_worker_is_replaced_and_the_batch_completes(
 
     killer = threading.Thread(target=kill_a_busy_worker)
     killer.start()
-    result = run_batch(discover(fleet), _settings(tmp_path / "out"), engine, progress=False)
+    specs = [s for s in discover(fleet) if s.drive in ("a_demo", "b_controlled")]
+    result = run_batch(specs, _settings(tmp_path / "out"), engine, progress=False)
     killer.join()
     assert killed, "no worker was busy: nothing was killed"
-    assert [o.status for o in result.outcomes] == ["done"] * 4
-    assert [o.alert_rows for o in result.outcomes] == [o.alert_rows for o in first_run.outcomes]
+    assert [o.status for o in result.outcomes] == ["done"] * 2
+    earlier = {o.drive: o.alert_rows for o in first_run.outcomes}
+    assert [o.alert_rows for o in result.outcomes] == [earlier[s.drive] for s in specs]
     assert len(engine.worker_pids()) == 2  # the nanny started a new one
 
 

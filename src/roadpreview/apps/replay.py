@@ -100,6 +100,8 @@ class ReplayInputs:
     imu_offset_s: float | None = None
     #: how `sources` put each input on the drive's clock (filled by `sources`)
     clock_notes: list[str] = field(default_factory=list, compare=False)
+    #: the calibration file ``camera`` was read from (an input of the replay: summary.json)
+    camera_file: Path | None = None
 
     @classmethod
     def from_recording(cls, folder: str | Path) -> ReplayInputs:
@@ -113,6 +115,7 @@ class ReplayInputs:
             video_start_s=rec.t0_unix_s,
             truth_events=rec.events,
             duration_s=rec.duration_s,
+            camera_file=rec.folder / "camera.toml",
         )
 
     @property
@@ -253,6 +256,7 @@ def drive_inputs(
         speed_topic=speed_topic,
         can_offset_s=can_offset_s,
         imu_offset_s=imu_offset_s,
+        camera_file=Path(camera),
     )
 
 
@@ -523,11 +527,11 @@ def input_files(inputs: ReplayInputs, sources: Sequence[Source]) -> list[Path]:
         path = getattr(inner, "path", None) or Path(s.name)
         if isinstance(path, Path) and path.is_file():
             paths.append(path)
-    frames_csv = getattr(inputs, "frames_csv", None)
-    if frames_csv is not None:
-        paths.append(Path(frames_csv))
+    for extra in (getattr(inputs, "frames_csv", None), getattr(inputs, "camera_file", None)):
+        if extra is not None and Path(extra).is_file():
+            paths.append(Path(extra))
     folder = Path(inputs.video).parent
-    for name in ("camera.toml", "scenario.toml", "truth.json"):
+    for name in ("scenario.toml", "truth.json"):
         if (folder / name).is_file() and inputs.truth_events is not None:
             paths.append(folder / name)
     return paths

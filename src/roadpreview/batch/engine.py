@@ -208,6 +208,17 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def quiet_dask_logs() -> None:
+    """Dask's scheduler and nanny log each worker's start, stop and restart at INFO; with
+    the command line's logging set up first, Dask adds no handler of its own and those
+    lines would reach the console. They are kept to warnings (a worker restarted, memory
+    pressure) unless the root logger is at DEBUG (``-vv``)."""
+    if logging.getLogger().getEffectiveLevel() > logging.DEBUG:
+        logger = logging.getLogger("distributed")
+        if logger.level == logging.NOTSET or logger.level < logging.WARNING:
+            logger.setLevel(logging.WARNING)
+
+
 def open_engine(
     scheduler: str | None = None,
     *,
@@ -221,9 +232,10 @@ def open_engine(
     import dask
 
     address = scheduler or dask.config.get("scheduler-address", None)
+    quiet_dask_logs()
     if address:
         if workers is not None:
-            log.warning("--workers is ignored with an existing cluster (%s)", address)
+            log.warning("the local worker count is ignored with an existing cluster (%s)", address)
         try:
             client = distributed.Client(address, timeout="10s")
         except OSError as exc:
@@ -263,4 +275,5 @@ __all__ = [
     "default_workers",
     "open_engine",
     "pin_threads",
+    "quiet_dask_logs",
 ]

@@ -122,9 +122,9 @@ def run_batch(
     files = write_tables(outcomes, out)
     md, png = write_report(outcomes, out, notes=[engine.describe(), *notes])
     files.update({"report.md": md, "report.png": png})
-    result = BatchResult(outcomes, out, seconds, engine.describe(), files)
-    _write_fleet_json(result, settings)
-    return result
+    batch = BatchResult(outcomes, out, seconds, engine.describe(), files)
+    _write_fleet_json(batch, settings)
+    return batch
 
 
 def _write_fleet_json(result: BatchResult, settings: BatchSettings) -> None:

@@ -63,9 +63,9 @@ def _plain(folders: list[Path], out: Path) -> tuple[float, int]:
 
 def _batch(folders: list[Path], out: Path, workers: int) -> tuple[float, float, int, str]:
     """(drives' wall time, whole job's wall time, frames, engine description)."""
-    from roadpreview.batch.fleet import run_batch
     from roadpreview.batch.drive import BatchSettings
     from roadpreview.batch.engine import open_engine
+    from roadpreview.batch.fleet import run_batch
     from roadpreview.batch.manifest import DriveSpec
     from roadpreview.digests import replay_source_digest
     from roadpreview.pipeline.config import PipelineConfig

@@ -94,8 +94,8 @@ def add_subparser(sub: Any) -> None:
 
 def _existing_batch(out: Path) -> bool:
     """``out`` is empty, or holds what a batch writes (fleet.json, or drive folders)."""
-    from roadpreview.batch.fleet import FLEET_JSON
     from roadpreview.batch.drive import BATCH_JSON
+    from roadpreview.batch.fleet import FLEET_JSON
 
     if not out.exists():
         return True
@@ -108,9 +108,9 @@ def _existing_batch(out: Path) -> bool:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from roadpreview.batch.fleet import run_batch
     from roadpreview.batch.drive import BatchSettings
     from roadpreview.batch.engine import open_engine
+    from roadpreview.batch.fleet import run_batch
     from roadpreview.batch.manifest import load_drives
     from roadpreview.digests import replay_source_digest
     from roadpreview.errors import ConfigError
