@@ -248,6 +248,7 @@ def run_drive(spec: DriveSpec, settings: BatchSettings) -> DriveOutcome:
     Never raises for a bad drive: the outcome says ``failed`` and why."""
     from roadpreview.apps.replay import OUTPUT_FILES, replay
 
+    t_task = time.perf_counter()
     folder = settings.out / spec.drive
     worker = _worker_address()
     try:
@@ -260,6 +261,7 @@ def run_drive(spec: DriveSpec, settings: BatchSettings) -> DriveOutcome:
         if earlier is not None:
             earlier.status = "skipped"
             earlier.worker = worker
+            earlier.task_s = time.perf_counter() - t_task
             return earlier
     t0 = time.perf_counter()
     try:
@@ -282,6 +284,7 @@ def run_drive(spec: DriveSpec, settings: BatchSettings) -> DriveOutcome:
             outcome.status = "failed"
             outcome.message = f"unusable input: {outcome.message}"
         outcome.worker = worker
+        outcome.task_s = time.perf_counter() - t_task
         _write_batch_json(folder, fp, outcome, _recorded_inputs(summary))
         return outcome
     except Exception as exc:  # this drive only: the batch goes on
@@ -298,6 +301,7 @@ def run_drive(spec: DriveSpec, settings: BatchSettings) -> DriveOutcome:
             message,
             str(folder),
             replay_s=time.perf_counter() - t0,
+            task_s=time.perf_counter() - t_task,
             worker=worker,
         )
         with contextlib.suppress(OSError):

@@ -81,6 +81,9 @@ class PinThreads(WorkerPlugin):
 
     def setup(self, worker: Any) -> None:
         pin_threads()
+        # the replay's modules (OpenCV, gtsam, scipy, ...) load once per worker as it
+        # starts, not inside the first drive's time
+        importlib.import_module("roadpreview.apps.replay")
 
 
 @dataclass(frozen=True)
@@ -249,6 +252,12 @@ def open_engine(
     if n < 1:
         raise ConfigError(f"--workers {n}: need at least 1")
     env = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **PINNED_ENV}
+    # Dask sets glibc's trim threshold to return memory to the system sooner; a fixed
+    # threshold also turns off glibc's adaptive mmap threshold, so every decoded frame
+    # (> 128 KiB) is mmap'ed, page-faulted and unmapped again: replay ran 1.6x slower
+    # in a worker than in a plain process (`roadpreview bench batch`). The pipeline
+    # streams (its memory is flat: docs/robustness.md), so glibc's default is kept.
+    env.pop("MALLOC_TRIM_THRESHOLD_", None)
     # the scheduler's HTTP server (metrics, and the dashboard when bokeh is installed) on a
     # free port: a second batch, or an evaluation, on the same machine must not collide
     board = ":0"

@@ -27,7 +27,8 @@ class DriveOutcome:
     frames: int = 0
     duration_s: float = math.nan  #: drive time covered, first to last frame, s
     distance_km: float = math.nan  #: distance driven (ego speed integrated), km
-    replay_s: float = math.nan  #: wall time of the replay, s
+    replay_s: float = math.nan  #: wall time of the replay's run loop, s
+    task_s: float = math.nan  #: wall time of the whole task on its worker (this run), s
     fps: float = math.nan  #: frames per second of wall time
     alerts: int = 0
     #: share of the drive's time in each fusion mode (`MODES`), 0..1
