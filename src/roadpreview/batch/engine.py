@@ -178,8 +178,15 @@ class Engine:
                 )
             try:
                 result = fut.result()
-            except distributed.KilledWorker as exc:
-                yield item, TaskFailure(item, f"its worker died repeatedly ({exc})")
+            except distributed.KilledWorker:
+                import dask
+
+                deaths = int(dask.config.get("distributed.scheduler.allowed-failures")) + 1
+                yield item, TaskFailure(
+                    item,
+                    f"its worker died {deaths} time(s) while running it (killed, out of"
+                    " memory, or a crash in a native library); see the workers' logs",
+                )
             except Exception as exc:  # a bug in a task: keep it to that task
                 yield item, TaskFailure(item, f"{type(exc).__name__}: {exc}")
             else:
