@@ -269,7 +269,8 @@ def run_drive(spec: DriveSpec, settings: BatchSettings) -> DriveOutcome:
         for name in (*OUTPUT_FILES, BATCH_JSON):  # no output of an earlier run survives
             (folder / name).unlink(missing_ok=True)
         with _DriveLog(folder / REPLAY_LOG):
-            inputs = spec.replay_inputs(truth=settings.truth)
+            # --truth: the simulator's drives are matched, the others replay without it
+            inputs = spec.replay_inputs(truth=settings.truth and spec.is_recording)
             result = replay(
                 inputs,
                 config,

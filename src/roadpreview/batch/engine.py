@@ -54,6 +54,18 @@ PINNED_ENV = {
 }
 
 
+#: a worker's own threads leave the drive's thread alone: Dask's statistical profiler
+#: samples the task's stack every 10 ms, and its event loop ticks every 20 ms, checks
+#: memory every 100 ms and the system every 500 ms, each taking the GIL; a drive runs
+#: for minutes, so checking every second is soon enough (`roadpreview bench batch`)
+CALM_WORKERS = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+}
+
+
 def _require_distributed() -> Any:
     import distributed
 
@@ -182,10 +194,13 @@ class Engine:
                 import dask
 
                 deaths = int(dask.config.get("distributed.scheduler.allowed-failures")) + 1
-                yield item, TaskFailure(
+                yield (
                     item,
-                    f"its worker died {deaths} time(s) while running it (killed, out of"
-                    " memory, or a crash in a native library); see the workers' logs",
+                    TaskFailure(
+                        item,
+                        f"its worker died {deaths} time(s) while running it (killed, out of"
+                        " memory, or a crash in a native library); see the workers' logs",
+                    ),
                 )
             except Exception as exc:  # a bug in a task: keep it to that task
                 yield item, TaskFailure(item, f"{type(exc).__name__}: {exc}")
@@ -268,7 +283,7 @@ def open_engine(
     # the scheduler's HTTP server (metrics, and the dashboard when bokeh is installed) on a
     # free port: a second batch, or an evaluation, on the same machine must not collide
     board = ":0"
-    with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": env, **CALM_WORKERS}):
         cluster = distributed.LocalCluster(
             n_workers=n,
             threads_per_worker=1,

@@ -102,7 +102,14 @@ class DriveSpec:
     def files(self) -> list[Path]:
         """The files named by the spec (besides what a recording folder holds)."""
         named = [self.camera, *self.can, self.imu_csv, self.frames_csv, self.config, self.dbc]
+        if self.mapping is not None and Path(self.mapping).is_file():
+            named.append(Path(self.mapping))
         return [p for p in named if p is not None]
+
+    @property
+    def is_recording(self) -> bool:
+        """The input is a roadpreview recording folder (it has true events)."""
+        return self.input.is_dir() and _is_recording(self.input)
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -274,6 +281,8 @@ def _spec(row: dict[str, Any], manifest: Path, where: str, camera: Path | None) 
                 raise ConfigError(f"{where}: {key} {value!r} is not a number (s)") from None
             if not math.isfinite(kw[key]):
                 raise ConfigError(f"{where}: {key} must be finite")
+        elif key == "mapping" and str(value).endswith(".toml"):  # a file, not a shipped name
+            kw[key] = str(_path(value, base, where, key))
         else:
             kw[key] = str(value)
     if not kw["input"].exists():
