@@ -93,9 +93,13 @@ class PinThreads(WorkerPlugin):
 
     def setup(self, worker: Any) -> None:
         pin_threads()
-        # the replay's modules (OpenCV, gtsam, scipy, ...) load once per worker as it
-        # starts, not inside the first drive's time
+        # the replay's modules (OpenCV, gtsam, scipy, matplotlib for plots.png, ...) load
+        # once per worker as it starts, not inside the first drive's time
         importlib.import_module("roadpreview.apps.replay")
+        import matplotlib
+
+        matplotlib.use("Agg")
+        importlib.import_module("matplotlib.pyplot")
 
 
 @dataclass(frozen=True)
