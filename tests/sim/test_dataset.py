@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TypedDict
 
 import numpy as np
 import pytest
@@ -15,35 +16,30 @@ from roadpreview.sim.recording import Recording, write_recording
 pytestmark = pytest.mark.slow
 
 
+class _Small(TypedDict):
+    duration_s: float
+    width: int
+    height: int
+
+
+SMALL = _Small(duration_s=1.5, width=320, height=180)
+
+
 def test_drives_rendered_on_the_engine_equal_those_rendered_here(tmp_path: Path) -> None:
     out = tmp_path / "ds"
-    build_dataset(
-        out,
-        preset_name="controlled",
-        n_drives=2,
-        seed=5,
-        jobs=2,
-        duration_s=1.5,
-        width=320,
-        height=180,
-    )
+
+    def build() -> None:
+        build_dataset(out, preset_name="controlled", n_drives=2, seed=5, jobs=2, **SMALL)
+
+    build()
     index = json.loads((out / "dataset.json").read_text())
     assert index["n_drives"] == 2
     here = tmp_path / "here"
-    write_recording(drive_config("controlled", 6, duration_s=1.5, width=320, height=180), here)
+    write_recording(drive_config("controlled", 6, **SMALL), here)
     a, b = Recording.open(out / "drive_00006"), Recording.open(here)
     assert a.truth.keys() == b.truth.keys()
     for key in a.truth:
         np.testing.assert_array_equal(a.truth[key], b.truth[key], err_msg=key)
     stamp = (out / "drive_00005" / "truth.json").stat().st_mtime_ns
-    build_dataset(
-        out,
-        preset_name="controlled",
-        n_drives=2,
-        seed=5,
-        jobs=2,
-        duration_s=1.5,
-        width=320,
-        height=180,
-    )
+    build()
     assert (out / "drive_00005" / "truth.json").stat().st_mtime_ns == stamp  # reused

@@ -73,13 +73,15 @@ def add_input_arguments(p: argparse.ArgumentParser, *, camera_required: bool = F
 
 
 def inputs_from_args(args: argparse.Namespace, *, truth: bool = False) -> ReplayInputs:
-    """The drive the arguments describe (truth events kept only with ``truth``)."""
-    from roadpreview.apps.replay import drive_inputs
+    """The drive the arguments describe (truth events kept only with ``truth``): the same
+    `DriveSpec` a batch manifest row gives."""
+    from roadpreview.batch.manifest import DriveSpec
 
-    return drive_inputs(
-        args.input,
+    spec = DriveSpec(
+        drive="",
+        input=args.input,
         camera=args.camera,
-        can_logs=list(args.can),
+        can=tuple(args.can),
         imu_csv=args.imu_csv,
         frames_csv=args.frames_csv,
         video_start_s=args.video_start,
@@ -88,5 +90,5 @@ def inputs_from_args(args: argparse.Namespace, *, truth: bool = False) -> Replay
         image_topic=args.image_topic,
         imu_topic=args.imu_topic,
         speed_topic=args.speed_topic,
-        truth=truth,
     )
+    return spec.replay_inputs(truth=truth)
