@@ -18,7 +18,8 @@ from typing import Any, TextIO
 log = logging.getLogger("roadpreview.progress")
 
 
-def _duration(seconds: float) -> str:
+def format_duration(seconds: float) -> str:
+    """``m:ss``, or ``h:mm:ss`` from an hour on."""
     s = max(0, round(seconds))
     return (
         f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
@@ -79,10 +80,10 @@ class Progress:
     def line(self, frames: int, seconds: float) -> str:
         """``replay: 300/1800 frames (16.7 %), 28.4 fps, 0:10 elapsed, 0:53 left``."""
         fps = frames / seconds if seconds > 0 else 0.0
-        elapsed = _duration(seconds)
+        elapsed = format_duration(seconds)
         if self.total is None:
             return f"{self.label}: {frames} frames, {fps:.1f} fps, {elapsed} elapsed"
-        left = _duration((self.total - frames) / fps) if fps > 0 else "?"
+        left = format_duration((self.total - frames) / fps) if fps > 0 else "?"
         return (
             f"{self.label}: {frames}/{self.total} frames ({100 * frames / self.total:.1f} %), "
             f"{fps:.1f} fps, {elapsed} elapsed, {left} left"

@@ -35,8 +35,10 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
+import distributed
 from distributed import WorkerPlugin
 
+from roadpreview.apps.progress import format_duration
 from roadpreview.errors import ConfigError, OperationError
 
 log = logging.getLogger(__name__)
@@ -64,12 +66,6 @@ CALM_WORKERS = {
     "distributed.worker.memory.monitor-interval": "1s",
     "distributed.admin.system-monitor.interval": "2s",
 }
-
-
-def _require_distributed() -> Any:
-    import distributed
-
-    return distributed
 
 
 def pin_threads() -> None:
@@ -164,7 +160,6 @@ class Engine:
         they complete; a task whose worker kept dying, or that raised, gives a
         `TaskFailure`. Progress: Dask's text bar on a terminal (``tty``; default: stderr
         is one), else a log line every ``every_s`` seconds."""
-        distributed = _require_distributed()
         if len(set(keys)) != len(keys):
             raise ConfigError(f"{label}: two tasks share a name")
         futures = [
@@ -178,7 +173,7 @@ class Engine:
         if progress and on_tty:
             from distributed.diagnostics.progressbar import progress as dask_progress
 
-            dask_progress(futures)  # type: ignore[no-untyped-call]  # blocks until every task is done (or failed)
+            dask_progress(futures)  # blocks until every task is done (or failed)
         t0 = time.monotonic()
         next_log = t0 + every_s
         for done, fut in enumerate(distributed.as_completed(futures), start=1):
@@ -190,7 +185,7 @@ class Engine:
                     label,
                     done,
                     len(futures),
-                    _duration(time.monotonic() - t0),
+                    format_duration(time.monotonic() - t0),
                 )
             try:
                 result = fut.result()
@@ -224,11 +219,6 @@ class Engine:
         self.close()
 
 
-def _duration(seconds: float) -> str:
-    s = max(0, round(seconds))
-    return f"{s // 60}:{s % 60:02d}"
-
-
 def default_workers() -> int:
     """As many workers as cores this process may use."""
     try:
@@ -257,7 +247,6 @@ def open_engine(
 ) -> Engine:
     """Connect to ``scheduler`` (or Dask's configured ``scheduler-address``), else start a
     local cluster of ``workers`` processes (module docstring)."""
-    distributed = _require_distributed()
     import dask
 
     address = scheduler or dask.config.get("scheduler-address", None)

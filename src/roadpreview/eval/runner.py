@@ -62,13 +62,9 @@ _NOT_PIPELINE = ("eval", "cli", "bench", "sim", "anomaly", "sinks", "apps", "bat
 
 
 # -- digests ------------------------------------------------------------------------------------
-_digest = digest
-_source_digest = source_digest
-
-
 def pipeline_source_digest() -> str:
     """What the traces depend on besides the configuration: the pipeline's source code."""
-    return _source_digest(("",), _NOT_PIPELINE)
+    return source_digest(("",), _NOT_PIPELINE)
 
 
 #: simulator modules a recording does not depend on: a preset only builds the
@@ -103,7 +99,7 @@ def _input_messages_digest() -> str:
         if m.frame_id not in dbc.RESERVED_OUTPUT_IDS
     ]
     code = [inspect.getsource(f) for f in (dbc.encode_protected, dbc.e2e_layout)]
-    return _digest([sorted(rows), code])
+    return digest([sorted(rows), code])
 
 
 def _signal_layout(sig: Any) -> tuple[Any, ...]:
@@ -113,14 +109,14 @@ def _signal_layout(sig: Any) -> tuple[Any, ...]:
 def simulator_source_digest() -> str:
     """What a recording depends on besides its scenario: the simulator's source code, the
     modules it writes with and the DBC's input messages."""
-    return _digest(
-        [_source_digest(("sim", *_RECORDING_DEPS), _NOT_RECORDING), _input_messages_digest()]
+    return digest(
+        [source_digest(("sim", *_RECORDING_DEPS), _NOT_RECORDING), _input_messages_digest()]
     )
 
 
 def scenario_digest(cfg: ScenarioConfig, sim: str | None = None) -> str:
     """What a recording of ``cfg`` is: its scenario and the simulator's source."""
-    return _digest({"scenario": to_mapping(cfg), "sim": sim or simulator_source_digest()})
+    return digest({"scenario": to_mapping(cfg), "sim": sim or simulator_source_digest()})
 
 
 # -- traces -------------------------------------------------------------------------------------
@@ -367,7 +363,7 @@ def trace_keys(methods: MethodSet, job: RecordingJob) -> dict[str, str]:
         "reference": _trajectory_settings(methods.configs[methods.reference]),
     }
     return {
-        m: _digest(
+        m: digest(
             {**common, "method": _trajectory_settings(cfg), "nan_std": methods.nan_std.get(m)}
         )
         for m, cfg in methods.configs.items()
