@@ -5,6 +5,7 @@ exposure meters."""
 from __future__ import annotations
 
 import math
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -103,8 +104,9 @@ class Atmosphere:
         light = np.asarray(cv2.multiply(inv2, self.beam), np.float32)
         np.minimum(light, 8.0, out=light)
         light += ambient
-        # a Python float is a cv2 scalar (product in double, rounded once); the stubs lack it
-        lg = cv2.multiply(light, gain)  # type: ignore[call-overload]
+        # a Python float is a cv2 scalar (product in double, rounded once); opencv's stubs
+        # before 4.11 lack that overload, later ones have it: Any fits both
+        lg = cv2.multiply(light, cast("Any", gain))
         root = cv2.sqrt(lg)  # in [0, 4] mapped to 0..255
         idx = cv2.convertScaleAbs(root, alpha=255.0 / 4.0)
         table = np.clip(64.0 * ((np.arange(256) * 4.0 / 255.0) ** 2) ** inv_g, 0, 255).astype(
