@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import fcntl
+import os
+import shutil
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -10,6 +13,7 @@ import pytest
 
 if TYPE_CHECKING:
     from roadpreview.sim.recording import Recording
+    from roadpreview.sim.scenario import ScenarioConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
@@ -41,18 +45,49 @@ def yolox_model() -> Path:
     return _shared("models", "yolox_nano.onnx")
 
 
+def recording_cache_root() -> Path:
+    """Where simulated recordings persist between runs and are shared by the xdist workers:
+    ``$ROADPREVIEW_TEST_CACHE`` or ``.pytest_cache/roadpreview-recordings``."""
+    env = os.environ.get("ROADPREVIEW_TEST_CACHE")
+    return Path(env) if env else ROOT / ".pytest_cache" / "roadpreview-recordings"
+
+
+def cached_recording(cfg: ScenarioConfig, dest: Path) -> Path:
+    """``cfg``'s recording copied into ``dest``: rendered once per scenario and simulator
+    source (`roadpreview.eval.runner.scenario_digest`) into the shared cache, under a file
+    lock so that two workers wanting the same drive render it once. The copy keeps a test
+    that damages its files away from the cache and from the other tests."""
+    from roadpreview.eval.runner import scenario_digest
+    from roadpreview.sim.recording import write_recording
+
+    root = recording_cache_root()
+    root.mkdir(parents=True, exist_ok=True)
+    key = scenario_digest(cfg)
+    done = root / key / ".complete"
+    with (root / f"{key}.lock").open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not done.exists():
+            shutil.rmtree(root / key, ignore_errors=True)  # a render that was cut short
+            write_recording(cfg, root / key)
+            done.touch()
+    shutil.copytree(root / key, dest, ignore=shutil.ignore_patterns(".complete"))
+    return dest
+
+
 @pytest.fixture(scope="session")
 def make_recording(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Recording]:
-    """Factory for simulated recordings, cached per session by their parameters.
+    """Factory for simulated recordings, cached by their scenario and the simulator's code.
 
     ``make_recording("demo", seed=0, duration_s=6.0, width=640, height=360, masks=False,
-    video=True)`` returns an opened `roadpreview.sim.recording.Recording`. Keep
-    drives short: rendering costs about 15-30 ms per frame at 640x360-1280x720.
+    video=True)`` returns an opened `roadpreview.sim.recording.Recording`, a copy of its
+    own for this session (`cached_recording`): rendered once for all runs and workers
+    until the simulator's source changes. Keep drives short all the same: a first render
+    costs about 15-30 ms per frame at 640x360-1280x720.
     """
     from dataclasses import replace
 
     from roadpreview.sim.dataset import drive_config
-    from roadpreview.sim.recording import Recording, write_recording
+    from roadpreview.sim.recording import Recording
 
     root = tmp_path_factory.mktemp("recordings")
     cache: dict[tuple[object, ...], Recording] = {}
@@ -84,8 +119,7 @@ def make_recording(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Re
             overrides = cast("dict[str, Any]", scenario_overrides)
             cfg = replace(cfg, output=replace(cfg.output, masks=masks, video=video), **overrides)
             folder = root / f"rec{len(cache):03d}_{preset}_{seed}"
-            write_recording(cfg, folder)
-            cache[key] = Recording.open(folder)
+            cache[key] = Recording.open(cached_recording(cfg, folder))
         return cache[key]
 
     return make

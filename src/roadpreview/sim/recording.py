@@ -32,6 +32,7 @@ from typing import Any
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from threadpoolctl import threadpool_limits
 
 from roadpreview.camera import CameraModel
 from roadpreview.canbus import load_database
@@ -79,7 +80,21 @@ def write_recording(
     *,
     progress: Callable[[int, int], None] | None = None,
 ) -> RecordingInfo:
-    """Simulate ``cfg`` and write its recording into ``folder`` (created; files replaced)."""
+    """Simulate ``cfg`` and write its recording into ``folder`` (created; files replaced).
+
+    The same ``cfg`` gives the same bits in any process on one machine and library build:
+    the simulation runs with one BLAS thread (a matrix product's kernel, and with it the
+    last bit of the vehicle dynamics, depends on BLAS's thread count: a 1-thread Dask
+    worker and a process with every core differed by 2e-17 in the IMU's true rates). Its
+    matrices are small (state-space models of a few states), so one thread costs nothing.
+    """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _write_recording(cfg, Path(folder), progress)
+
+
+def _write_recording(
+    cfg: ScenarioConfig, folder: Path, progress: Callable[[int, int], None] | None
+) -> RecordingInfo:
     t_start = time.perf_counter()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
