@@ -413,6 +413,17 @@ class TwoAxleConfig:
         " duration, on one common window: the matched filter's side lobes (half a body"
         " period, 0.38 s, off and of the opposite sign) are not taken for the anomaly",
     )
+    refine_prior_s: float = param(
+        0.19,
+        unit="s",
+        gt=0,
+        le=2,
+        help="std of the prior on the refined crossing around the detection's: a shift by"
+        " a side lobe's offset (half a body period, 0.38 s) costs (0.38 / 0.19)^2 = 4 in the"
+        " fit's chi-square units, so a side lobe of the opposite sign takes the crossing and"
+        " the height's sign only when it fits decisively better (a quarter body period: not"
+        " tuned on any drive)",
+    )
     close_fit_fraction: float = param(
         0.8,
         unit="",

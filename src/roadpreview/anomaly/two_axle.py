@@ -927,22 +927,29 @@ class TwoAxleDetector(LastFrame):
         )
         if not (energy_c[_ROLL] > 0).any():
             sides = ((Side.BOTH, 1.0, 0.0),)
-        best_e, best_side, amp, energy = -1.0, event.side, np.zeros(1), np.zeros(1)
+        # the detection's crossing as a prior (a Gaussian of std ``refine_prior_s`` on the
+        # shift, in the fit's chi-square units): a side lobe half a body period off, of the
+        # opposite sign, takes the crossing (and the height's sign) only when it fits
+        # decisively better, not by a hair that the libraries' last bits decide
+        penalty = np.repeat((shifts / cfg.refine_prior_s) ** 2, j_n)
+        best_e, best_side, amp, energy = -math.inf, event.side, np.zeros(1), np.zeros(1)
         for side, u_h, u_r in sides:
             num = u_h * corr[_HEAVE] + u_r * corr[_ROLL]
             den = u_h * u_h * energy_c[_HEAVE] + u_r * u_r * energy_c[_ROLL]
             with np.errstate(invalid="ignore", divide="ignore"):
                 a = num / np.where(den > 0, den, np.nan)
-                e = a * num
+                e = a * num - penalty
             if np.isfinite(e).any() and float(np.nanmax(e)) > best_e:
                 best_e, best_side, amp, energy = float(np.nanmax(e)), side, a, e
-        if best_e < 0:
+        if not math.isfinite(best_e) or float(np.nanmax(energy + penalty)) <= 0:
             return event
         e2 = energy.reshape(k_n, j_n)
         a2 = amp.reshape(k_n, j_n)
         k, best = np.unravel_index(int(np.nanargmax(e2)), e2.shape)
-        # every (alignment, duration) that fits almost as well bounds the height
-        close = np.isfinite(e2) & (e2 >= cfg.close_fit_fraction * e2[k, best])
+        # every (alignment, duration) that fits almost as well bounds the height: its
+        # posterior within (1 - close_fit_fraction) of the best's fit energy of the best's
+        fit_best = float(e2[k, best] + penalty.reshape(k_n, j_n)[k, best])
+        close = np.isfinite(e2) & (e2 >= e2[k, best] - (1.0 - cfg.close_fit_fraction) * fit_best)
         spread = float(np.std(a2[close])) if np.count_nonzero(close) > 1 else 0.0
         height = float(a2[k, best])
         length = math.nan
