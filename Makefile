@@ -11,7 +11,8 @@ LATEST := .venv-latest
 # build group, for every supported Python from 3.10 on, on any platform (Linux x86_64/aarch64 among them)
 LOCK_ARGS := pyproject.toml --extra dev --extra eval --group build --universal --generate-hashes \
 	--python-version 3.10
-# pytest-xdist: one worker per core (override with `make test PYTEST_WORKERS=1`)
+# pytest-xdist: one worker per core (override with `make test PYTEST_WORKERS=1`); a module
+# goes to one worker whole (--dist loadscope), so its module fixtures are built once
 PYTEST_WORKERS ?= auto
 
 .PHONY: demo test lint bench lock test-latest clean
@@ -31,7 +32,7 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 test: lint
-	$(BIN)/python -m pytest -n $(PYTEST_WORKERS)
+	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) --dist loadscope
 
 bench: $(STAMP)
 	$(BIN)/roadpreview bench all
@@ -51,7 +52,7 @@ test-latest: $(STAMP)
 	@echo "test-latest: $$(wc -l < $(LATEST)/versions.txt) packages, listed in $(LATEST)/versions.txt"
 	$(LATEST)/bin/ruff check src tests bench
 	$(LATEST)/bin/mypy
-	$(LATEST)/bin/python -m pytest -n $(PYTEST_WORKERS) -p no:cacheprovider
+	$(LATEST)/bin/python -m pytest -n $(PYTEST_WORKERS) --dist loadscope
 
 clean:
 	rm -rf $(VENV) $(LATEST) build .pytest_cache .mypy_cache .ruff_cache

@@ -53,16 +53,23 @@ def recording_cache_root() -> Path:
 
 
 def cached_recording(cfg: ScenarioConfig, dest: Path) -> Path:
-    """``cfg``'s recording copied into ``dest``: rendered once per scenario and simulator
-    source (`roadpreview.eval.runner.scenario_digest`) into the shared cache, under a file
+    """``cfg``'s recording copied into ``dest``: rendered once per scenario, simulator
+    source (`roadpreview.eval.runner.scenario_digest`) and numpy / scipy / OpenCV version
+    into the shared cache, under a file
     lock so that two workers wanting the same drive render it once. The copy keeps a test
     that damages its files away from the cache and from the other tests."""
+    import cv2
+    import numpy as np
+    import scipy
+
+    from roadpreview.digests import digest
     from roadpreview.eval.runner import scenario_digest
     from roadpreview.sim.recording import write_recording
 
     root = recording_cache_root()
     root.mkdir(parents=True, exist_ok=True)
-    key = scenario_digest(cfg)
+    # the libraries that compute and encode it too (`make test-latest` shares the cache)
+    key = digest([scenario_digest(cfg), np.__version__, scipy.__version__, cv2.__version__])
     done = root / key / ".complete"
     with (root / f"{key}.lock").open("w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
@@ -174,3 +181,11 @@ def _restore_log_levels(_log_levels_at_start: dict[str, int]) -> Iterator[None]:
     reset()
     yield
     reset()
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Modules marked ``slow`` run first (stable otherwise): with ``--dist loadscope`` each
+    module goes to one xdist worker whole (its module fixtures built once), and the
+    longest ones started first keep both cores busy to the end instead of leaving one
+    long module alone at the tail."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)

@@ -22,6 +22,8 @@ from roadpreview.types import FusionMode
 if TYPE_CHECKING:  # conftest is not importable at run time (--import-mode=importlib)
     from tests.fusion.conftest import Drive, FrontEnd, FusionTestKit, Replay
 
+pytestmark = pytest.mark.slow  # a simulated drive rendered and replayed: scheduled first
+
 DEG = math.pi / 180.0
 FUSED, IMU_ONLY = int(FusionMode.FUSED), int(FusionMode.IMU_ONLY)
 

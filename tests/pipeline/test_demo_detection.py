@@ -35,6 +35,8 @@ from roadpreview.sim.presets import demo
 from roadpreview.sim.recording import Recording
 from roadpreview.types import FusionMode
 
+pytestmark = pytest.mark.slow  # a simulated drive rendered and replayed: scheduled first
+
 
 @pytest.fixture(scope="module")
 def demo_replay(make_recording: Callable[..., Recording]) -> ReplayResult:

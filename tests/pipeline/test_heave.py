@@ -26,6 +26,8 @@ from roadpreview.sources.can import CanLogSource, make_decoder
 from roadpreview.sources.video import VideoFileSource
 from roadpreview.types import InputSample
 
+pytestmark = pytest.mark.slow  # a simulated drive rendered and replayed: scheduled first
+
 Array = NDArray[np.float64]
 
 #: the demo drive's first bump: the ego's front wheels reach it at 7.78 s, the rear at 8.10 s

@@ -20,6 +20,8 @@ from roadpreview.sim.render import RenderConfig, SceneRenderer, rear_face_center
 from roadpreview.sim.scene import SceneConfig, generate_scene
 from roadpreview.sim.types import CameraPose, Conditions, VehiclePose, VehicleShape
 
+pytestmark = pytest.mark.slow  # a simulated drive rendered and replayed: scheduled first
+
 W, H = 1280, 720
 CAM_H = 1.3  # camera height above the (flat) road
 X0 = 50.0  # camera X in the tests

@@ -22,6 +22,8 @@ from roadpreview.sim.types import CameraPose, Conditions, VehiclePose, VehicleSh
 from roadpreview.vision.frontend import FrameVision, VisionConfig, VisionFrontEnd
 from roadpreview.vision.tracker import LeadTrackerConfig
 
+pytestmark = pytest.mark.slow  # a simulated drive rendered and replayed: scheduled first
+
 DRIVE = {"seed": 0, "duration_s": 10.0, "width": 640, "height": 360}
 
 
