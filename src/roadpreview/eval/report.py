@@ -21,8 +21,9 @@ from typing import TYPE_CHECKING, Any
 from roadpreview.anomaly import DETECTORS
 from roadpreview.eval import experiments as ex
 from roadpreview.eval import figures
+from roadpreview.eval.detectors import THRESHOLD_FIELDS
 from roadpreview.eval.plan import EXPERIMENTS
-from roadpreview.eval.product import THRESHOLD_FIELDS, e6_product
+from roadpreview.eval.product import e6_product
 
 if TYPE_CHECKING:
     from roadpreview.eval.suite import EvalResults
@@ -896,7 +897,7 @@ CONFIRMATION_ROWS = {
     "beside": "real, the ego passes beside it",
     "false": "false alarm",
 }
-#: the unit of each detector's threshold (`product.THRESHOLD_FIELDS`)
+#: the unit of each detector's threshold (`detectors.THRESHOLD_FIELDS`)
 THRESHOLD_UNITS = {"std": "px", "two-axle": "background std"}
 
 
