@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 
 from roadpreview.cli.main import main
-from roadpreview.eval.report import render
+from roadpreview.eval.report.markdown import render
 
 pytestmark = pytest.mark.slow
 

@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING
 import can
 import pytest
 
-from roadpreview.apps.replay import ReplayInputs, ReplayResult, replay
+from roadpreview.apps.replay import ReplayInputs, replay
+from roadpreview.apps.result import ReplayResult
 from roadpreview.canbus import read_can_log
 from roadpreview.sources.can import make_decoder
 from roadpreview.sources.clockguard import MAX_WARNINGS, ClockGuard

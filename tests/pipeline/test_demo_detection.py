@@ -28,7 +28,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from roadpreview.apps.replay import ReplayInputs, ReplayResult, replay
+from roadpreview.apps.replay import ReplayInputs, replay
+from roadpreview.apps.result import ReplayResult
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.truthmatch import MatchReport, MatchRow
 from roadpreview.sim.presets import demo

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from roadpreview.apps.replay import ReplayInputs, ReplayResult, replay
+from roadpreview.apps.replay import ReplayInputs, replay
+from roadpreview.apps.result import ReplayResult
 from roadpreview.canbus import read_can_log
 from roadpreview.canbus.logio import LOG_SUFFIXES, write_can_log
 from roadpreview.cli.main import main

@@ -18,7 +18,7 @@ Per camera frame (``docs/detector.md``, "The two-axle detector"):
 3. **Prewhitening.** Each channel is differenced and passed through the
    prediction-error filter of an AR(4) model fitted to its background (the
    lead's own bouncing on this road, the tracking noise, the compensation's
-   residual: `_Whitener`); the templates go through the same filters.
+   residual: `Whitener`); the templates go through the same filters.
 4. **Fit.** Least squares of the whitened channel on the whitened template plus a
    constant over [t_k - ``pre_s``, t]: the amplitude is the road input ĥ in
    metres (bump +, pothole -), its white-noise std the innovations' std over the
@@ -44,6 +44,10 @@ within the window (the tracker holds something else), nor while the lead
 stands still; no score while the background is being learnt. The suppression
 rules (lead braking, DEGRADED, unsettled IMU_ONLY) are the windowed-std
 detector's (`SuppressionTracker`).
+
+This module holds the detector (the fit, the score, the events and their refinement);
+`roadpreview.anomaly.two_axle_signal` its signal side (steps 1, 3 and 5's level: the
+channels on the frame grid, the templates on it, the whitening filters, the background).
 """
 
 from __future__ import annotations
@@ -54,7 +58,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, signal
 
 from roadpreview.anomaly.base import (
     AnomalyEvent,
@@ -67,113 +70,32 @@ from roadpreview.anomaly.base import (
 from roadpreview.anomaly.config import TwoAxleConfig
 from roadpreview.anomaly.response import TemplateBank
 from roadpreview.anomaly.suppression import SuppressionTracker
+from roadpreview.anomaly.two_axle_signal import (
+    AR_ORDER,
+    COL_D,
+    COL_DSTD,
+    COL_JOLT,
+    COL_MODE,
+    COL_T,
+    COL_V,
+    COL_Y,
+    COL_YD,
+    COMPENSATION,
+    HEAVE,
+    MAD_TO_STD,
+    NCOL,
+    ROLL,
+    CfarBackground,
+    FloatArray,
+    Ring,
+    TemplateGrid,
+    Whitener,
+    channels_on_grid,
+    template_grid,
+    whiten_templates,
+)
 from roadpreview.configtools import check_ranges
 from roadpreview.types import FusionMode, Side, SuppressionReason
-
-FloatArray = NDArray[np.float64]
-
-#: median |x| / this = std of a Gaussian x (the MAD consistency constant)
-_MAD_TO_STD = 0.6745
-
-# columns of the sample ring buffer
-_T, _Y, _YD, _COMP, _D, _V, _MODE, _DSTD, _JOLT = range(9)
-_NCOL = 9
-# channels of the fit: heave (whole lead), roll (left - right), the compensation applied
-_HEAVE, _ROLL, _COMPENSATION = range(3)
-
-
-class _Ring:
-    """The last ``capacity`` rows, readable as one contiguous slice (each row is written
-    twice, at i and i + capacity)."""
-
-    def __init__(self, capacity: int, columns: int) -> None:
-        self.capacity = capacity
-        self.data = np.full((2 * capacity, columns), np.nan)
-        self.n = 0  # rows written so far
-
-    def clear(self) -> None:
-        self.data.fill(np.nan)
-        self.n = 0
-
-    def push(self, row: FloatArray) -> None:
-        i = self.n % self.capacity
-        self.data[i] = row
-        self.data[i + self.capacity] = row
-        self.n += 1
-
-    def last(self, m: int) -> FloatArray:
-        """The newest ``m`` rows (fewer if fewer were written), oldest first."""
-        m = min(m, self.n, self.capacity)
-        end = (self.n - 1) % self.capacity + self.capacity + 1
-        return self.data[end - m : end]
-
-
-class _Background:
-    """Running level of the fitted amplitudes: per channel and duration, the median of |ĥ|
-    over the frames of the last ``span_s`` (anomalies take a few per cent of them: the
-    median does not see them), or over the last ``short_s`` when that is higher (the level
-    rises within seconds when the road or the tracking gets worse, and falls slowly).
-    Rows live in a numpy ring; the medians are recomputed every ``refresh`` pushes."""
-
-    def __init__(
-        self, span_s: float, short_s: float, shape: tuple[int, int], refresh: int, capacity: int
-    ) -> None:
-        self.span_s = span_s
-        self.short_s = short_s
-        self.shape = shape
-        self.refresh = refresh
-        self._t = np.full(capacity, -np.inf)
-        self._rows = np.full((capacity, shape[0] * shape[1]), np.nan)
-        self._n = 0
-        self._first_t = math.nan
-        self._last_t = math.nan
-        self._level = np.full(shape, np.inf)  # inf: no background yet
-
-    @property
-    def seconds(self) -> float:
-        """Time span of the frames held."""
-        if self._n < 2:
-            return 0.0
-        return min(self._last_t - self._first_t, self.span_s)
-
-    @property
-    def pushes(self) -> int:
-        """Frames pushed so far."""
-        return self._n
-
-    def push(self, t: float, abs_amplitude: FloatArray) -> None:
-        i = self._n % self._t.size
-        self._t[i] = t
-        self._rows[i] = abs_amplitude.ravel()
-        if self._n == 0:
-            self._first_t = t
-        self._last_t = t
-        self._n += 1
-        if self._n % self.refresh == 0 or self._n == 2:
-            self._update(t)
-
-    def _update(self, t: float) -> None:
-        recent = self._t >= t - self.span_s
-        short = self._t >= t - self.short_s
-        level = np.fmax(_nan_median(self._rows[recent]), _nan_median(self._rows[short]))
-        level = level.reshape(self.shape) / _MAD_TO_STD
-        self._level = np.where(np.isfinite(level), level, np.inf)
-
-    def level(self) -> FloatArray:
-        """1-std-equivalent background (channel, duration), m (inf: none)."""
-        return self._level
-
-
-def _nan_median(x: FloatArray) -> FloatArray:
-    """Median of each column over its finite values (NaN: none), one sort for all."""
-    n = np.count_nonzero(np.isfinite(x), axis=0)
-    srt = np.sort(x, axis=0)  # NaN sorts last
-    cols = np.arange(x.shape[1])
-    lo = np.maximum((n - 1) // 2, 0)
-    hi = np.maximum(n // 2, 0)
-    out = 0.5 * (srt[lo, cols] + srt[hi, cols])
-    out[n == 0] = np.nan
-    return np.asarray(out)
 
 
 @dataclass(frozen=True)
@@ -193,9 +115,6 @@ class TwoAxleRun:
         return [e for e in self.events if not e.suppressed]
 
 
-#: order of the prewhitening AR model (at 25-60 fps the body bounce, the tracking noise and
-#: the compensation residual need about four poles; 2 underfits a class D road)
-_AR_ORDER = 4
 #: the two-axle lag is rounded to this for the template cache, s (3 % of a 0.17 s lag at
 #: 60 km/h: well inside the bank's duration steps)
 _TAU_STEP_S = 0.005
@@ -207,66 +126,6 @@ _MAX_FPS = 120.0
 _REMEASURE_FRAMES = 30
 #: the range rate (a slope over a second) is re-fitted every this many frames
 _RANGE_RATE_EVERY = 5
-
-
-@dataclass(frozen=True, eq=False)
-class _Grid:
-    """The templates on a regular frame grid ending now: raw (with `_AR_ORDER` + 1 frames
-    of history in front, for the filters), each duration's window, and the energy an
-    unwhitened fit against a line would have (the white-noise floor)."""
-
-    key: tuple[float, float]  #: (τ, frame interval)
-    s: FloatArray  #: (J, m + p + 1)
-    inside: FloatArray  #: (J, m) 1 inside each duration's window, 0 outside
-    ss_raw: FloatArray  #: (J,)
-    n: FloatArray  #: (J,) frames in each window
-
-
-class _Whitener:
-    """A channel's prediction-error filter: first differences (a line becomes a constant,
-    slow drift goes), then the AR(p) filter A(z) fitted to the background's differences by
-    Yule-Walker, so that the road's own bouncing, the tracking noise and the compensation's
-    residual come out white and the fit is the GLRT against the background's spectrum.
-    A(z) = 1 until the first background has been seen."""
-
-    def __init__(self, channel: int, order: int) -> None:
-        self.channel = channel
-        self.order = order
-        self.a = np.array([1.0])
-        self._b = np.array([1.0, -1.0])  # differences, then A(z): one FIR filter
-        self.version = 0
-
-    def fit(self, dx: FloatArray) -> None:
-        """Fit A(z) to the differenced background samples ``dx`` (finite)."""
-        p = self.order
-        if dx.size < 10 * p:
-            return
-        dx = dx - dx.mean()
-        r = np.array([np.dot(dx[k:], dx[: dx.size - k]) for k in range(p + 1)]) / dx.size
-        if not r[0] > 0:
-            return
-        try:
-            coef = linalg.solve_toeplitz(r[:p], r[1 : p + 1])
-        except (np.linalg.LinAlgError, ValueError):
-            return
-        if np.all(np.isfinite(coef)):
-            self.a = np.concatenate([[1.0], -coef])
-            self._b = np.convolve(self.a, [1.0, -1.0])
-            self.version += 1
-
-    @property
-    def white_gain(self) -> float:
-        """Std of the output for white input of unit std (differences, then A(z))."""
-        return float(np.sqrt(np.sum(self._b**2)))
-
-    def apply(self, x: FloatArray) -> FloatArray:
-        """Differences of ``x`` along its last axis through A(z) (an FIR filter), without
-        the first p + 1 samples (the filters' start-up): ``x.shape[-1] - p - 1`` values."""
-        if x.ndim == 1:
-            # the per-frame case: np.convolve is faster than lfilter on one short row
-            return np.convolve(x, self._b)[self.order + 1 : x.size]
-        y = signal.lfilter(self._b, [1.0], x, axis=-1)
-        return np.asarray(y[..., self.order + 1 :])
 
 
 class _ExcursionPicker:
@@ -311,7 +170,7 @@ class _Hypothesis:
 
     center_s: float  #: centre of the anomaly's pulse under the front axle, s
     tau_s: float  #: the two-axle lag, s (NaN: unknown)
-    channel: int  #: _HEAVE or _ROLL
+    channel: int  #: HEAVE or ROLL
     noise_m: float  #: the background std of the amplitude, m (NaN: not metric)
     focal_px: float
 
@@ -342,8 +201,8 @@ class TwoAxleDetector(LastFrame):
         cfg = self.config
         self.bank = TemplateBank.cached(cfg.vehicle, cfg.durations_s)
         self._durations = np.asarray(cfg.durations_s, dtype=float)
-        self._ring = _Ring(cfg.buffer_frames, _NCOL)
-        self._background = _Background(
+        self._ring = Ring(cfg.buffer_frames, NCOL)
+        self._background = CfarBackground(
             cfg.background_s,
             cfg.background_short_s,
             (2, len(cfg.durations_s)),
@@ -361,11 +220,11 @@ class TwoAxleDetector(LastFrame):
         self._last_event_t = -math.inf
         self._last_cross_t = -math.inf  # crossing time of the last event reported
         self._range_rate = math.nan
-        self._grids: dict[tuple[float, float], _Grid] = {}
+        self._grids: dict[tuple[float, float], TemplateGrid] = {}
         self._whitened_cache: dict[
             tuple[float, float, int, int], tuple[FloatArray, FloatArray]
         ] = {}
-        self._whiteners = (_Whitener(_HEAVE, _AR_ORDER), _Whitener(_ROLL, _AR_ORDER))
+        self._whiteners = (Whitener(HEAVE, AR_ORDER), Whitener(ROLL, AR_ORDER))
         # per background frame: differences of heave and roll, the ego's acceleration peak,
         # the heave and roll innovations
         self._ar_rows = np.full((math.ceil(cfg.background_s * _MAX_FPS), 5), np.nan)
@@ -404,7 +263,7 @@ class TwoAxleDetector(LastFrame):
         cfg = self.config
         learning = self._background.seconds < cfg.background_min_s
         if learning and not (
-            self._whiteners[_HEAVE].version > 0 and math.isfinite(self._innovation_std[_HEAVE])
+            self._whiteners[HEAVE].version > 0 and math.isfinite(self._innovation_std[HEAVE])
         ):
             # nothing known of the road yet: no score
             self._update_background(t, fit, 0.0)
@@ -423,7 +282,7 @@ class TwoAxleDetector(LastFrame):
         c, j = np.unravel_index(int(np.argmax(z)), z.shape)
         score = float(z[c, j])
         self._update_background(t, fit, score)
-        height = float(fit.amplitude[_HEAVE, j])
+        height = float(fit.amplitude[HEAVE, j])
         self._frame = DetectorFrame(
             t=t,
             s=math.nan,
@@ -491,16 +350,16 @@ class TwoAxleDetector(LastFrame):
     def _lead_speed(self, rows: FloatArray) -> float:
         """v_lead = ego speed + range rate (slope of the distance over ``range_rate_s``)."""
         cfg = self.config
-        v_ego = rows[-1, _V]
+        v_ego = rows[-1, COL_V]
         if not math.isfinite(v_ego):
             return math.nan
         n = self._ring.n
         if n - self._rate_at < _RANGE_RATE_EVERY and math.isfinite(self._range_rate):
             return float(v_ego + self._range_rate)
         self._rate_at = n
-        t = rows[:, _T]
+        t = rows[:, COL_T]
         recent = t >= t[-1] - cfg.range_rate_s
-        d = rows[recent, _D]
+        d = rows[recent, COL_D]
         tt = t[recent]
         ok = np.isfinite(d)
         if np.count_nonzero(ok) >= 5 and tt[ok][-1] - tt[ok][0] >= 0.5 * cfg.range_rate_s:
@@ -520,7 +379,7 @@ class TwoAxleDetector(LastFrame):
 
         The channels are taken on the regular frame grid ending now (dropped frames and
         short invalid stretches are interpolated), differenced and filtered by their
-        background's prediction-error filter (`_Whitener`); the templates go through the
+        background's prediction-error filter (`Whitener`); the templates go through the
         same filters and are cached per (τ, frame interval, filter), residualised against a
         constant within each duration's window, so that the fit is one small matrix
         product per channel."""
@@ -537,7 +396,7 @@ class TwoAxleDetector(LastFrame):
         lag = (0.0 if math.isnan(tau) else tau) + self._durations + cfg.post_s  # (J,)
         focal = sample.focal_px
         self._tau, self._focal = tau, focal
-        dt = self._frame_interval(rows[:, _T])
+        dt = self._frame_interval(rows[:, COL_T])
         if not math.isfinite(dt):
             return None
         grid = self._grid(tau, dt, lag)
@@ -545,7 +404,7 @@ class TwoAxleDetector(LastFrame):
         x = self._on_grid(rows, t, dt, n)
         if x is None:
             return None
-        d = rows[-n:, _D] if rows.shape[0] >= n else rows[:, _D]
+        d = rows[-n:, COL_D] if rows.shape[0] >= n else rows[:, COL_D]
         d_ok = d[np.isfinite(d)]
         d_med = float(d_ok.mean()) if d_ok.size else math.nan  # (jumps are refused below)
         if d_ok.size and (
@@ -584,88 +443,9 @@ class TwoAxleDetector(LastFrame):
         )
 
     def _on_grid(self, rows: FloatArray, t: float, dt: float, n: int) -> FloatArray | None:
-        """The channels (heave, roll, compensation) on the ``n`` grid times ending at ``t``
-        (n, 3): the frames themselves on a regular grid, else interpolated across dropped
-        frames and invalid stretches up to ``max_gap_s`` (a channel with a longer gap, or
-        no sample, is NaN); None when the heave channel has such a gap or the history is
-        too short. The lead's channels are also interpolated across the ego's own jolts
-        (`_jolt_mask`): the compensation misses part of such sharp motion."""
-        cfg = self.config
-        if rows.shape[0] >= n:
-            win = rows[-n:]
-            expected = t - dt * np.arange(n - 1, -1, -1)
-            x = win[:, (_Y, _YD, _COMP)]
-            jolted = self._jolt_mask(win)
-            regular = np.abs(win[:, _T] - expected).max() <= 0.25 * dt
-            if regular and not jolted.any() and np.isfinite(x[:, 0]).all():
-                return self._destep(x)
-        times = rows[:, _T]
-        grid_t = t - dt * np.arange(n - 1, -1, -1)
-        if times[0] > grid_t[0] + 0.5 * dt:
-            return None  # not enough history
-        first = max(int(np.searchsorted(times, grid_t[0], side="right")) - 1, 0)
-        times = times[first:]
-        jolted = self._jolt_mask(rows[first:])
-        allowed = cfg.max_gap_s + sum(cfg.jolt_mask_s) if jolted.any() else cfg.max_gap_s
-        out = np.full((n, 3), np.nan)
-        for c, col in enumerate((_Y, _YD, _COMP)):
-            vals = rows[first:, col]
-            ok = np.isfinite(vals) & (~jolted if c < 2 else True)
-            if np.count_nonzero(ok) < 2:
-                continue
-            tv = times[ok]
-            gaps = np.diff(np.concatenate([[grid_t[0]], tv, [grid_t[-1]]]))
-            if gaps.max() > allowed + 0.5 * dt:
-                continue
-            out[:, c] = np.interp(grid_t, tv, vals[ok])
-        return self._destep(out) if np.isfinite(out[:, 0]).all() else None
-
-    def _destep(self, x: FloatArray) -> FloatArray:
-        """The lead's channels without the tracker's jumps: a frame-to-frame change far
-        beyond the background's (``glitch_sigma`` robust stds) and beyond its neighbours'
-        (``glitch_ratio`` times the largest of the two frames either side; a body moves
-        smoothly, a re-seeded grid or a box that snaps does not) is taken out of every
-        later sample."""
-        cfg = self.config
-        out = x
-        for c in (_HEAVE, _ROLL):
-            sd = self._diff_std[c]
-            col = x[:, c]
-            if not math.isfinite(sd) or not np.isfinite(col).all() or col.size < 6:
-                continue
-            d = np.diff(col)
-            ad = np.abs(d)
-            if ad.max() <= cfg.glitch_sigma * sd:  # the usual case: no jump at all
-                continue
-            big = ad > cfg.glitch_sigma * sd
-            a = np.abs(np.pad(d, 2, mode="edge"))
-            around = np.max(np.stack([a[:-4], a[1:-3], a[3:-1], a[4:]]), axis=0)
-            jump = big & (np.abs(d) > cfg.glitch_ratio * around)
-            if jump.any():
-                if out is x:
-                    out = x.copy()
-                out[1:, c] -= np.cumsum(np.where(jump, d, 0.0))
-        return out
-
-    def _jolt_mask(self, rows: FloatArray) -> NDArray[np.bool_]:
-        """Rows within ``jolt_mask_s`` (before, after) of a frame where the ego itself was
-        jolted: its band-passed vertical acceleration peaked at ``jolt_ratio`` times its
-        background and at least ``jolt_min_mps2``."""
-        cfg = self.config
-        peak = rows[:, _JOLT]
-        level = self._ego_level
-        if not math.isfinite(level):
-            return np.zeros(rows.shape[0], dtype=np.bool_)
-        with np.errstate(invalid="ignore"):
-            hit = peak >= max(cfg.jolt_ratio * level, cfg.jolt_min_mps2)
-        if not hit.any():
-            return hit
-        times = rows[:, _T]
-        before, after = cfg.jolt_mask_s
-        out = np.zeros_like(hit)
-        for tj in times[hit]:  # a handful of jolt frames per window
-            out |= (times >= tj - before) & (times <= tj + after)
-        return out
+        """The channels on the regular grid of ``n`` frames ending at ``t``
+        (`channels_on_grid`, with this road's jolt level and frame-to-frame change)."""
+        return channels_on_grid(rows, t, dt, n, self.config, self._ego_level, self._diff_std)
 
     def _frame_interval(self, times: FloatArray) -> float:
         """The median frame interval of the last frames, rounded to 0.1 ms (NaN: unknown);
@@ -679,53 +459,25 @@ class TwoAxleDetector(LastFrame):
             self._dt_at = n
         return self._dt
 
-    def _grid(self, tau: float, dt: float, lag: FloatArray) -> _Grid:
-        """The templates on the regular frame grid ending now (raw, zero outside each
-        duration's window), with the filters' history in front."""
+    def _grid(self, tau: float, dt: float, lag: FloatArray) -> TemplateGrid:
+        """The templates on the regular frame grid ending now (`template_grid`), cached per
+        (τ, frame interval)."""
         key = (tau, dt)
         grid = self._grids.get(key)
         if grid is None:
-            cfg = self.config
-            span = lag + cfg.pre_s
-            m = math.ceil(float(span.max()) / dt) + 1
-            n = m + _AR_ORDER + 1
-            g = -dt * np.arange(n - 1, -1, -1)  # frame times relative to now
-            inside = g[None, :] >= -span[:, None] - 1e-9
-            rel = g[None, :] + lag[:, None]
-            s = self.bank.two_axle(rel, tau, cfg.vehicle.rho)
-            # the unwhitened fit's energy (against a line): the white tracking noise's floor
-            w = inside.astype(float)
-            cnt = w.sum(axis=1)
-            g_mean = (w * g).sum(axis=1) / cnt
-            gc = (g[None, :] - g_mean[:, None]) * w
-            s_in = s * w
-            s_mean = s_in.sum(axis=1) / cnt
-            slope = (gc * s_in).sum(axis=1) / (gc * gc).sum(axis=1)
-            s_line = (s_in - s_mean[:, None] - slope[:, None] * gc) * w
-            grid = _Grid(
-                key=key,
-                s=s,
-                inside=w[:, _AR_ORDER + 1 :],
-                ss_raw=(s_line * s_line).sum(axis=1),
-                n=cnt,
-            )
+            grid = template_grid(self.bank, self.config, tau, dt, lag)
             if len(self._grids) >= _MAX_GRIDS:
                 self._grids.pop(next(iter(self._grids)))
             self._grids[key] = grid
         return grid
 
-    def _whitened(self, grid: _Grid, whitener: _Whitener) -> tuple[FloatArray, FloatArray]:
-        """The grid's templates through ``whitener``, minus their mean within each window
-        (zero outside it), and their energies; cached per filter version."""
+    def _whitened(self, grid: TemplateGrid, whitener: Whitener) -> tuple[FloatArray, FloatArray]:
+        """The grid's templates through ``whitener`` (`whiten_templates`), cached per filter
+        version."""
         key = (*grid.key, whitener.channel, whitener.version)
         hit = self._whitened_cache.get(key)
         if hit is None:
-            sw = whitener.apply(grid.s)  # (J, m)
-            inside = grid.inside
-            cnt = inside.sum(axis=1)
-            mean = (sw * inside).sum(axis=1) / cnt
-            s_r = (sw - mean[:, None]) * inside
-            hit = (s_r, (s_r * s_r).sum(axis=1))
+            hit = whiten_templates(grid, whitener)
             if len(self._whitened_cache) >= 4 * _MAX_GRIDS:
                 self._whitened_cache.clear()
             self._whitened_cache[key] = hit
@@ -741,11 +493,11 @@ class TwoAxleDetector(LastFrame):
         white = self._innovation_std[:, None] / np.sqrt(fit.energy)
         level = 1.0 if learning else self._background.level()
         sig = np.maximum(white * level, cfg.tracking_noise_px * fit.sigma_fit)
-        comp = cfg.compensation_error_fraction * np.abs(fit.amplitude[_COMPENSATION])
-        sig[_HEAVE] = np.hypot(sig[_HEAVE], np.where(np.isfinite(comp), comp, 0.0))
+        comp = cfg.compensation_error_fraction * np.abs(fit.amplitude[COMPENSATION])
+        sig[HEAVE] = np.hypot(sig[HEAVE], np.where(np.isfinite(comp), comp, 0.0))
         # the halves never move quite alike: a share of the heave leaks into the roll channel
-        leak = cfg.roll_leak_fraction * np.abs(fit.amplitude[_HEAVE])
-        sig[_ROLL] = np.hypot(sig[_ROLL], np.where(np.isfinite(leak), leak, 0.0))
+        leak = cfg.roll_leak_fraction * np.abs(fit.amplitude[HEAVE])
+        sig[ROLL] = np.hypot(sig[ROLL], np.where(np.isfinite(leak), leak, 0.0))
         return np.asarray(sig)
 
     def _update_background(self, t: float, fit: _Fit, score: float) -> None:
@@ -760,12 +512,12 @@ class TwoAxleDetector(LastFrame):
         last = self._ring.last(2)
         if last.shape[0] == 2:
             i = self._ar_n % self._ar_rows.shape[0]
-            self._ar_rows[i, 0] = last[1, _Y] - last[0, _Y]
-            self._ar_rows[i, 1] = last[1, _YD] - last[0, _YD]
-            self._ar_rows[i, 2] = last[1, _JOLT]
+            self._ar_rows[i, 0] = last[1, COL_Y] - last[0, COL_Y]
+            self._ar_rows[i, 1] = last[1, COL_YD] - last[0, COL_YD]
+            self._ar_rows[i, 2] = last[1, COL_JOLT]
             self._ar_rows[i, 3:5] = fit.innovation
             self._ar_n += 1
-        if math.isfinite(self._innovation_std[_HEAVE]):
+        if math.isfinite(self._innovation_std[HEAVE]):
             # the amplitudes in units of their white-noise std: independent of the filter
             self._background.push(t, amp * np.sqrt(fit.energy) / self._innovation_std[:, None])
         elif self._ar_n >= 2:
@@ -784,20 +536,20 @@ class TwoAxleDetector(LastFrame):
             w.fit(dx[np.isfinite(dx)])
             ok = dx[np.isfinite(dx)]
             if ok.size >= 10:
-                self._diff_std[c] = float(np.median(np.abs(ok - np.median(ok)))) / _MAD_TO_STD
+                self._diff_std[c] = float(np.median(np.abs(ok - np.median(ok)))) / MAD_TO_STD
             inn = held[:, 3 + c]
             inn = inn[np.isfinite(inn)]
             floor = cfg.tracking_noise_px * w.white_gain
             if inn.size >= 5:
-                self._innovation_std[c] = max(float(np.median(np.abs(inn))) / _MAD_TO_STD, floor)
+                self._innovation_std[c] = max(float(np.median(np.abs(inn))) / MAD_TO_STD, floor)
         ego = held[:, 2]
         ego = ego[np.isfinite(ego)]
         self._ego_level = float(np.median(ego)) if ego.size >= 10 else math.nan
 
     def _event_height(self, fit: _Fit, j: int) -> tuple[float, Side, float]:
         """|height|, side and signed height of the anomaly at duration ``j``."""
-        a_h = float(fit.amplitude[_HEAVE, j])
-        a_r = float(fit.amplitude[_ROLL, j])
+        a_h = float(fit.amplitude[HEAVE, j])
+        a_r = float(fit.amplitude[ROLL, j])
         if not math.isfinite(a_r):
             return abs(a_h), Side.UNKNOWN, a_h
         if not math.isfinite(a_h) or abs(a_r) < self.config.one_sided_ratio * abs(a_h):
@@ -821,18 +573,18 @@ class TwoAxleDetector(LastFrame):
         cfg = self.config
         _, side, height = self._event_height(fit, j)
         rows = self._ring.last(cfg.buffer_frames)
-        times = rows[:, _T]
+        times = rows[:, COL_T]
         # the front axle over the anomaly's middle (its pulse's centre)
         t_cross = float(fit.t_cross[j]) + 0.5 * float(self._durations[j])
         i = int(np.clip(np.searchsorted(times, t_cross), 0, len(times) - 1))
-        d = rows[:, _D]
+        d = rows[:, COL_D]
         known = np.flatnonzero(np.isfinite(d))
         if known.size:
             i_d = int(known[np.argmin(np.abs(known - i))])
-            distance, distance_std = float(d[i_d]), float(rows[i_d, _DSTD])
+            distance, distance_std = float(d[i_d]), float(rows[i_d, COL_DSTD])
         else:
             distance, distance_std = math.nan, math.nan
-        speed = float(rows[i, _V])
+        speed = float(rows[i, COL_V])
         v_lead = self._lead_speed(rows)
         if not fit.metric:
             height = math.nan
@@ -848,7 +600,7 @@ class TwoAxleDetector(LastFrame):
             lead_distance_m=distance,
             lead_distance_std_m=distance_std,
             ego_speed_mps=speed if math.isfinite(speed) else None,
-            mode=FusionMode(int(rows[i, _MODE])),
+            mode=FusionMode(int(rows[i, COL_MODE])),
             valid_fraction=float(fit.valid_fraction[j]),
             suppressed=suppressed,
             score=score,
@@ -881,12 +633,12 @@ class TwoAxleDetector(LastFrame):
             return event
         rows = self._ring.last(cfg.buffer_frames)
         dur = self._durations
-        t_now = float(rows[-1, _T])
+        t_now = float(rows[-1, COL_T])
         search = cfg.refine_search_s
         earliest = hyp.center_s - search - 0.5 * float(dur.max()) - cfg.pre_s
-        n = math.ceil((t_now - earliest) / dt) + _AR_ORDER + 2
+        n = math.ceil((t_now - earliest) / dt) + AR_ORDER + 2
         x = self._on_grid(rows, t_now, dt, n)
-        d = rows[np.isfinite(rows[:, _D]), _D]
+        d = rows[np.isfinite(rows[:, COL_D]), COL_D]
         if x is None or not d.size:
             return event
         grid_t = t_now - dt * np.arange(n - 1, -1, -1)
@@ -903,10 +655,10 @@ class TwoAxleDetector(LastFrame):
         corr, energy_c = [], []
         sd = self._innovation_std
         weights = (
-            1.0 / sd[_HEAVE] ** 2,
-            1.0 / (sd[_ROLL] ** 2 + (cfg.roll_leak_fraction * sd[_HEAVE]) ** 2),
+            1.0 / sd[HEAVE] ** 2,
+            1.0 / (sd[ROLL] ** 2 + (cfg.roll_leak_fraction * sd[HEAVE]) ** 2),
         )
-        for c in (_HEAVE, _ROLL):
+        for c in (HEAVE, ROLL):
             xc = x[:, c]
             if not np.isfinite(xc).all() or not math.isfinite(weights[c]):
                 corr.append(np.zeros(k_n * j_n))
@@ -925,7 +677,7 @@ class TwoAxleDetector(LastFrame):
             (Side.LEFT, 0.5, 1.0),
             (Side.RIGHT, 0.5, -1.0),
         )
-        if not (energy_c[_ROLL] > 0).any():
+        if not (energy_c[ROLL] > 0).any():
             sides = ((Side.BOTH, 1.0, 0.0),)
         # the detection's crossing as a prior (a Gaussian of std ``refine_prior_s`` on the
         # shift, in the fit's chi-square units): a side lobe half a body period off, of the
@@ -934,8 +686,8 @@ class TwoAxleDetector(LastFrame):
         penalty = np.repeat((shifts / cfg.refine_prior_s) ** 2, j_n)
         best_e, best_side, amp, energy = -math.inf, event.side, np.zeros(1), np.zeros(1)
         for side, u_h, u_r in sides:
-            num = u_h * corr[_HEAVE] + u_r * corr[_ROLL]
-            den = u_h * u_h * energy_c[_HEAVE] + u_r * u_r * energy_c[_ROLL]
+            num = u_h * corr[HEAVE] + u_r * corr[ROLL]
+            den = u_h * u_h * energy_c[HEAVE] + u_r * u_r * energy_c[ROLL]
             with np.errstate(invalid="ignore", divide="ignore"):
                 a = num / np.where(den > 0, den, np.nan)
                 e = a * num - penalty
@@ -957,10 +709,10 @@ class TwoAxleDetector(LastFrame):
             length = event.lead_speed_mps * float(dur[best])
         t_cross = float(centers[k])
         # the lead's distance at the refined crossing (nearest frame that has one)
-        times = rows[:, _T]
-        known = np.flatnonzero(np.isfinite(rows[:, _D]))
+        times = rows[:, COL_T]
+        known = np.flatnonzero(np.isfinite(rows[:, COL_D]))
         i = int(known[np.argmin(np.abs(times[known] - t_cross))])
-        distance = float(rows[i, _D])
+        distance = float(rows[i, COL_D])
         v = cfg.vehicle
         if event.side is Side.UNKNOWN:
             best_side = Side.UNKNOWN  # no halves: the side stays unknown
@@ -972,7 +724,7 @@ class TwoAxleDetector(LastFrame):
             height_std_m=math.hypot(hyp.noise_m, spread),
             length_m=length,
             lead_distance_m=distance,
-            lead_distance_std_m=float(rows[i, _DSTD]),
+            lead_distance_std_m=float(rows[i, COL_DSTD]),
             anomaly_distance_m=distance + v.rear_overhang_m + v.wheelbase_m,
         )
 

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from roadpreview.apps.progress import Progress
+from roadpreview.apps.result import ReplayResult
 from roadpreview.apps.summary import write_summary
 from roadpreview.camera import CameraModel
 from roadpreview.canbus.imu_csv import read_imu_csv
@@ -35,8 +36,8 @@ from roadpreview.canbus.mapping import load_mapping
 from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.loop import Pace, RunSummary, SourceFailed, run
 from roadpreview.pipeline.config import PipelineConfig
-from roadpreview.pipeline.pipeline import FrameResult, Pipeline
-from roadpreview.pipeline.truthmatch import MatchReport, match_alerts
+from roadpreview.pipeline.pipeline import Pipeline
+from roadpreview.pipeline.truthmatch import match_alerts
 from roadpreview.sinks import Sink
 from roadpreview.sinks.can import CanLogSink, CanMemorySink, repetition_config
 from roadpreview.sinks.files import (
@@ -70,7 +71,7 @@ from roadpreview.sources.rosbag import (
 )
 from roadpreview.sources.video import VideoFileSource, frame_times
 from roadpreview.sources.window import WindowedSource
-from roadpreview.types import Alert, ConfirmationResult, FusionMode, RoadState
+from roadpreview.types import Alert, ConfirmationResult, FusionMode
 
 log = logging.getLogger(__name__)
 
@@ -258,65 +259,6 @@ def drive_inputs(
         imu_offset_s=imu_offset_s,
         camera_file=Path(camera),
     )
-
-
-@dataclass
-class ReplayResult:
-    """What a replay did (`RunSummary` plus the replay's own findings)."""
-
-    run: RunSummary
-    video_start_s: float
-    out: Path | None
-    match: MatchReport | None = None
-    results: list[FrameResult] | None = None
-    video_name: str = ""  #: the video source's name (its errors are decode failures)
-    clock_notes: list[str] = field(default_factory=list)  #: how the inputs were put on one clock
-    #: inputs that gave nothing: ``{"path": ..., "reason": ...}`` (`replay`)
-    unusable_inputs: list[dict[str, str]] = field(default_factory=list)
-
-    @property
-    def frames(self) -> int:
-        return self.run.frames
-
-    @property
-    def alerts(self) -> list[Alert]:
-        return self.run.alerts
-
-    @property
-    def confirmations(self) -> list[ConfirmationResult]:
-        return self.run.confirmations
-
-    @property
-    def mode_changes(self) -> list[tuple[float, FusionMode, str]]:
-        return self.run.mode_changes
-
-    @property
-    def seconds(self) -> float:
-        return self.run.seconds
-
-    @property
-    def fps(self) -> float:
-        return self.run.fps
-
-    @property
-    def interrupted(self) -> bool:
-        return self.run.interrupted
-
-    @property
-    def road(self) -> RoadState:
-        """The road class at the end."""
-        return self.run.last.road if self.run.last is not None else RoadState()
-
-    @property
-    def decode_failures(self) -> int:
-        """Video frames that could not be decoded."""
-        return self.run.source_errors.get(self.video_name, 0)
-
-    @property
-    def input_errors(self) -> int:
-        """Samples the CAN and IMU sources lost."""
-        errors = self.run.source_errors
-        return sum(n for name, n in errors.items() if name != self.video_name)
 
 
 #: the files `replay` writes into its output folder

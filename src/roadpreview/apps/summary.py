@@ -35,7 +35,7 @@ from roadpreview.pipeline.truthmatch import MatchReport
 from roadpreview.types import Confirmation, FusionMode
 
 if TYPE_CHECKING:
-    from roadpreview.apps.replay import ReplayResult
+    from roadpreview.apps.result import ReplayResult
     from roadpreview.pipeline.config import PipelineConfig
 
 #: distributions whose versions the summary records (alternatives: the first installed)

@@ -65,7 +65,8 @@ def add_subparser(sub: Any) -> None:
 def _run(args: argparse.Namespace) -> int:
     from roadpreview.errors import ConfigError
     from roadpreview.eval.plan import EvalPlan
-    from roadpreview.eval.report import headline, table1_text, write_report
+    from roadpreview.eval.report.console import headline, table1_text
+    from roadpreview.eval.report.markdown import write_report
     from roadpreview.eval.suite import parse_experiments, run_evaluation
     from roadpreview.pipeline.config import PipelineConfig
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from roadpreview.anomaly import AlertBuilder, AnomalyConfig, make_detector
+from roadpreview.anomaly import DETECTORS, AlertBuilder, AnomalyConfig, make_detector
 from roadpreview.anomaly.base import AnomalyEvent
 from roadpreview.anomaly.confirm import EgoConfirmer
 from roadpreview.anomaly.roughness import RoadRoughness
@@ -26,6 +26,17 @@ from roadpreview.eval.runner import Trace
 from roadpreview.types import Alert, ConfirmationResult
 
 Array = NDArray[np.float64]
+
+#: the threshold field of each detector's table (the knob the operating points turn)
+THRESHOLD_FIELDS: dict[str, str] = {"two-axle": "threshold_z", "std": "threshold_px"}
+
+
+def at_threshold(anomaly: AnomalyConfig, detector: str, threshold: float) -> AnomalyConfig:
+    """``anomaly`` with ``detector``'s threshold (its `THRESHOLD_FIELDS` entry) set to
+    ``threshold``: an operating point."""
+    field_name = DETECTORS[detector][2]
+    table = replace(getattr(anomaly, field_name), **{THRESHOLD_FIELDS[detector]: threshold})
+    return replace(anomaly, **{field_name: table})
 
 
 @dataclass(frozen=True)

@@ -53,9 +53,8 @@ SUITE_MIN_SIGNAL_PX = 1.5
 HEIGHT_MIN_SIGNAL_PX = 2.0
 #: false alarms per minute of the operating points
 FA_PER_MIN = (0.5, 1.0)
-#: the threshold field of each detector's table, and the thresholds the operating points
-#: are chosen from (each a full run of the detector: its events depend on the threshold)
-THRESHOLD_FIELDS: dict[str, str] = {"two-axle": "threshold_z", "std": "threshold_px"}
+#: the thresholds (of each detector's `detectors.THRESHOLD_FIELDS` entry) the operating
+#: points are chosen from (each a full run of the detector: its events depend on it)
 THRESHOLD_GRIDS: dict[str, tuple[float, ...]] = {
     "two-axle": (4.0, 4.5, 5.0, 5.5, 6.0, 7.0, 8.0, 10.0),
     "std": (0.8, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0),

@@ -1,5 +1,6 @@
 """One evaluation run: simulate what the plan needs, run every method over it, run the
-experiments, write ``results.json`` (and the report, `roadpreview.eval.report`).
+experiments and draw their figures (`run_experiments`), write ``results.json`` (the report,
+`roadpreview.eval.report`, is rendered from it).
 
     results = run_evaluation(EvalPlan.quick(), "runs/eval-quick", jobs=2)
 
@@ -22,11 +23,13 @@ from typing import TYPE_CHECKING, Any
 from roadpreview import __version__
 from roadpreview.configtools import from_mapping, to_mapping
 from roadpreview.errors import ConfigError
+from roadpreview.eval import experiments as ex
+from roadpreview.eval import figures
 from roadpreview.eval.experiments import EvalData
 from roadpreview.eval.methods import METHODS, REFERENCE_METHOD, select_methods
 from roadpreview.eval.metrics import require_sklearn
 from roadpreview.eval.plan import EXPERIMENTS, EvalPlan
-from roadpreview.eval.report import run_experiments
+from roadpreview.eval.product import e6_product
 from roadpreview.eval.runner import MethodSet, RecordingOutcome, process_all
 from roadpreview.fusion import BACKENDS
 from roadpreview.pipeline.config import PipelineConfig
@@ -143,6 +146,61 @@ def parse_experiments(text: str | None) -> tuple[str, ...]:
     if unknown:
         raise ConfigError(f"--experiments: unknown {unknown}; choose from {','.join(EXPERIMENTS)}")
     return tuple(n for n in EXPERIMENTS if n in names)
+
+
+def run_experiments(
+    data: EvalData,
+    fig_dir: Path,
+    experiments: Sequence[str] = EXPERIMENTS,
+    *,
+    default_threshold_px: float = 1.0,
+) -> dict[str, Any]:
+    """Each experiment of ``experiments`` on ``data``, its figure drawn into ``fig_dir``:
+    ``results.json``'s ``results`` (the result's ``as_dict()`` with its figure's file
+    name). ``default_threshold_px``: E3's common threshold (the configured one)."""
+    res: dict[str, Any] = {}
+
+    def with_figure(numbers: dict[str, Any], name: str) -> dict[str, Any]:
+        return {**numbers, "figure": name}
+
+    if "e4" in experiments:
+        t1 = ex.table1(data)
+        res["e4"] = with_figure(t1.as_dict(), figures.plot_roc(t1, fig_dir / "e4_roc.png"))
+    thresholds = ex.thresholds_of(data) if {"e3", "e5"} & set(experiments) else {}
+    if "e1" in experiments:
+        e1 = ex.signal_vs_distance(data)
+        path = fig_dir / "e1_signal_vs_distance.png"
+        res["e1"] = with_figure(e1.as_dict(), figures.plot_signal_vs_distance(e1, path))
+    if "e2" in experiments:
+        e2 = ex.ego_bump(data)
+        res["e2"] = with_figure(
+            e2.as_dict(), figures.plot_ego_bump(e2, fig_dir / "e2_ego_bump.png")
+        )
+    if "e3" in experiments:
+        e3 = ex.fpr_vs_rotation(data, thresholds, default_threshold_px)
+        path = fig_dir / "e3_fpr_vs_rotation.png"
+        res["e3"] = with_figure(e3.as_dict(), figures.plot_fpr_vs_rotation(e3, path))
+    if "e5" in experiments:
+        tl = ex.texture_loss(data, thresholds)
+        rng = ex.detection_range(data)
+        lt = ex.lead_time(data)
+        res["e5"] = {
+            "texture_loss": with_figure(
+                tl.as_dict(), figures.plot_texture_loss(tl, fig_dir / "e5_texture_loss.png")
+            ),
+            "range": with_figure(rng.as_dict(), figures.plot_range(rng, fig_dir / "e5_range.png")),
+            "lead_time": with_figure(
+                lt.as_dict(), figures.plot_lead_time(lt, fig_dir / "e5_lead_time.png")
+            ),
+        }
+    if "e6" in experiments:
+        e6 = e6_product(data)
+        if "calibration" in e6:
+            e6["reliability_figure"] = figures.plot_reliability(
+                e6["calibration"], fig_dir / "e6_reliability.png"
+            )
+        res["e6"] = e6
+    return res
 
 
 def run_evaluation(

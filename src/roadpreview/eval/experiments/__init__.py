@@ -1,7 +1,8 @@
 """The experiments: the paper's Fig. 4-7 and Table I, then ours (texture loss, range, lead
 time). Each takes the processed data (`EvalData`) and returns a frozen dataclass of
-numbers (its ``as_dict()`` is the JSON of ``results.json``); the figures are drawn from
-those by `roadpreview.eval.figures`, and `roadpreview.eval.report` puts the two together.
+numbers (its ``as_dict()`` is the JSON of ``results.json``); `roadpreview.eval.suite`
+runs them and draws their figures (`roadpreview.eval.figures`), and
+`roadpreview.eval.report` writes the report from the JSON.
 
 * `signal_distance` (E1, Fig. 4): s at the bump crossings of the ``controlled`` drives vs
   the lead distance, the fit s(d) = α f δ / d + β, the separation distance.

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import zlib
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -14,7 +14,7 @@ import numpy as np
 from roadpreview.anomaly import DETECTORS
 from roadpreview.anomaly.config import AnomalyConfig
 from roadpreview.eval.clips import ClipTable, Scores, draw_clips, score_table
-from roadpreview.eval.detectors import DetectorTrace, run_detector
+from roadpreview.eval.detectors import DetectorTrace, at_threshold, run_detector
 from roadpreview.eval.experiments.base import Array
 from roadpreview.eval.methods import METHODS, MethodSpec
 from roadpreview.eval.plan import EvalPlan
@@ -100,15 +100,10 @@ class EvalData:
         self, job: RecordingJob, method: str, detector: str, threshold: float
     ) -> DetectorTrace:
         """``detector`` on ``method``'s trace of ``job`` with its threshold set to
-        ``threshold`` (its `THRESHOLD_FIELDS` entry): an operating point."""
-        from roadpreview.eval.product import THRESHOLD_FIELDS
-
+        ``threshold`` (`at_threshold`): an operating point."""
         key = (job.key, method, f"{detector}@{threshold:g}")
         if key not in self._runs:
-            anomaly = self.methods.configs[method].anomaly
-            field_name = DETECTORS[detector][2]
-            table = replace(getattr(anomaly, field_name), **{THRESHOLD_FIELDS[detector]: threshold})
-            anomaly = replace(anomaly, **{field_name: table})
+            anomaly = at_threshold(self.methods.configs[method].anomaly, detector, threshold)
             self._runs[key] = run_detector(self.traces(job)[method], anomaly, detector)
         return self._runs[key]
 
