@@ -47,7 +47,6 @@ test-latest: $(STAMP)
 	rm -rf $(LATEST)
 	$(BIN)/uv venv --quiet --python $(BIN)/python $(LATEST)
 	$(BIN)/uv pip install --quiet --python $(LATEST)/bin/python --upgrade -e '.[dev,eval]' --group build
-	$(LATEST)/bin/python -m pip --version >/dev/null 2>&1 || true
 	$(BIN)/uv pip list --python $(LATEST)/bin/python --format freeze > $(LATEST)/versions.txt
 	@echo "test-latest: $$(wc -l < $(LATEST)/versions.txt) packages, listed in $(LATEST)/versions.txt"
 	$(LATEST)/bin/ruff check src tests bench
