@@ -14,10 +14,12 @@ are thin compositions of it (`roadpreview.apps`, `roadpreview.eval.runner`).
 2. **Push** each sample into the pipeline. A camera frame not after the previous one is
    skipped and counted. After each frame the loop hands the `FrameResult` and the
    status to every sink, tracks the mode changes, and every ``status_period_s`` (on the
-   frames' clock) sends the status to every sink: one schedule for a bus and a log. In a
-   live run the schedule also runs between frames (after the first one), so RP_STATUS
-   keeps its cycle when the camera stalls, until the camera watchdog's image-less frames
-   take over.
+   frames' clock, `roadpreview.clock.Cycle`) sends the status to every sink: one
+   schedule for a log and the status line. In a live run the schedule also runs between
+   frames (after the first one), on the loop's clock. The live CAN bus does not wait for
+   it: `roadpreview.sinks.can.CanBusSink` with a `StatusCycle` sends RP_STATUS from a
+   thread of its own on the same cycle, from the newest status the loop handed it, so a
+   loop held up by a burst of input or a slow frame does not hold the status up.
 3. **Watchdogs** see every sample and are polled after each batch of released samples
    (at least every ``poll_s``); they log, count, and may inject samples (an image-less
    frame while the camera is lost).
@@ -27,6 +29,11 @@ are thin compositions of it (`roadpreview.apps`, `roadpreview.eval.runner`).
 
 A sink that raises is logged and counted in ``summary.sink_errors``; it does not stop
 the run.
+
+**Clocks.** A live run waits on a `roadpreview.clock.Clock` (``clock``; a `Pace` is one
+too): the paced sources until a sample is due, the merge for arrivals (at most
+``poll_s``), the supervisor's backoffs. Tests pass a `roadpreview.clock.VirtualClock`
+and run on virtual time.
 
 **Supervision.** Every source is read through a supervisor (`Supervision`): an exception
 out of its iterator is logged (``event=thread_died source=... error=...``), counted
@@ -57,12 +64,14 @@ from dataclasses import dataclass, field, replace
 from types import FrameType
 from typing import Any, Protocol
 
+from roadpreview.clock import Clock, Cycle, SystemClock
 from roadpreview.errors import OperationError
 from roadpreview.fusion.mode_machine import gyro_state, mode_reason
 from roadpreview.pipeline.pipeline import FrameResult
 from roadpreview.pipeline.run_summary import FrameTimes, RunSummary
 from roadpreview.sinks import Sink
 from roadpreview.sources import Source, merge_key, merge_sources
+from roadpreview.supervision import Supervision
 from roadpreview.types import (
     Alert,
     CameraFrame,
@@ -73,7 +82,6 @@ from roadpreview.types import (
 )
 
 log = logging.getLogger(__name__)
-
 
 class Stage(Protocol):
     """What the loop drives: `roadpreview.pipeline.Pipeline`, or the evaluation's fan-out
@@ -103,12 +111,15 @@ class Watchdog(Protocol):
 @dataclass
 class Pace:
     """Play at recorded speed (times ``rate``): sample time ``t`` is due at wall time
-    ``wall0 + (t - t0) / rate``. ``t0`` defaults to the first sample's time, ``wall0`` to
-    the moment the run starts; set both to line several players up on one clock."""
+    ``wall0 + (t - t0) / rate`` of ``clock`` (default: the system's). ``t0`` defaults to
+    the first sample's time, ``wall0`` to the moment the run starts; set both to line
+    several players up on one clock. A pace is itself a `roadpreview.clock.Clock` on the
+    samples' time: ``now``, ``wait`` (a timeout in sample seconds) and `sleep_until`."""
 
     rate: float = 1.0
     t0: float | None = None
     wall0: float | None = None
+    clock: Clock = field(default_factory=SystemClock)
 
     def __post_init__(self) -> None:
         if not self.rate > 0:
@@ -121,19 +132,34 @@ class Pace:
             if self.t0 is None:
                 self.t0 = t0
             if self.wall0 is None:
-                self.wall0 = time.time()
+                self.wall0 = self.clock.now()
 
     @property
     def started(self) -> bool:
         return self.t0 is not None and self.wall0 is not None
 
     def due_in(self, t: float) -> float:
-        """Seconds until sample time ``t`` is due (negative: overdue)."""
-        return self._wall0() + (t - self._t0()) / self.rate - time.time()
+        """Seconds (of ``clock``) until sample time ``t`` is due (negative: overdue)."""
+        return self._wall0() + (t - self._t0()) / self.rate - self.clock.now()
 
     def now(self) -> float:
         """The sample clock now."""
-        return self._t0() + (time.time() - self._wall0()) * self.rate
+        return self._t0() + (self.clock.now() - self._wall0()) * self.rate
+
+    def wait(self, event: threading.Event, timeout_s: float | None) -> bool:
+        """`Clock.wait` with the timeout in sample seconds."""
+        return self.clock.wait(event, None if timeout_s is None else timeout_s / self.rate)
+
+    def event(self) -> threading.Event:
+        return self.clock.event()
+
+    def sleep_until(self, t: float, stop: threading.Event) -> bool:
+        """Wait until sample time ``t`` is due (`start` first) or ``stop`` is set; True if
+        stopped."""
+        if stop.is_set():
+            return True
+        wait = self.due_in(t)
+        return wait > 0 and self.clock.wait(stop, wait)
 
     def _t0(self) -> float:
         if self.t0 is None:
@@ -144,27 +170,6 @@ class Pace:
         if self.wall0 is None:
             raise RuntimeError("Pace.start was not called")
         return self.wall0
-
-
-@dataclass(frozen=True)
-class Supervision:
-    """How the loop restarts a source whose iterator raised (module docstring)."""
-
-    #: deaths in a row after which the run ends with an error (the daemon exits non-zero)
-    max_restarts: int = 5
-    backoff_s: float = 0.1  #: a live source's first restart waits this long, s
-    max_backoff_s: float = 2.0  #: ... and every further one twice as long, up to this, s
-    #: a live source that ran this long since its last restart starts the count again, s
-    healthy_s: float = 10.0
-
-    def __post_init__(self) -> None:
-        if self.max_restarts < 0:
-            raise ValueError(f"max_restarts {self.max_restarts}: must be >= 0")
-        if not (0 <= self.backoff_s <= self.max_backoff_s):
-            raise ValueError(
-                f"backoff_s {self.backoff_s} s must be in [0, max_backoff_s = "
-                f"{self.max_backoff_s} s]"
-            )
 
 
 class SourceFailed(OperationError):
@@ -180,9 +185,10 @@ class _Supervisor:
     """Reads each source through `samples`, restarting it when its iterator raises
     (module docstring); thread-safe counts per source name."""
 
-    def __init__(self, policy: Supervision, stop: threading.Event) -> None:
+    def __init__(self, policy: Supervision, stop: threading.Event, clock: Clock) -> None:
         self.policy = policy
         self.stop = stop
+        self.clock = clock  #: a live source's backoff and healthy time run on it
         self.deaths: Counter[str] = Counter()  #: exceptions out of each source's iterator
         self.restarts: Counter[str] = Counter()  #: times each source was iterated again
         self.failed = ""  #: why the run must end ('' while every source is fine)
@@ -195,7 +201,7 @@ class _Supervisor:
         in_row = 0  # deaths since the source last made progress
         given = 0  # samples given so far (a file source read again resumes after them)
         while True:
-            started = time.monotonic()
+            started = self.clock.now()
             progressed = False
             try:
                 # a file source reads the same samples again from its start: skip those
@@ -212,7 +218,7 @@ class _Supervisor:
                 return
             except Exception as exc:
                 error = f"{type(exc).__name__}: {exc}".splitlines()[0]
-                healthy = time.monotonic() - started >= policy.healthy_s
+                healthy = self.clock.now() - started >= policy.healthy_s
                 if progressed and (healthy or not source.live):
                     in_row = 0
                 in_row += 1
@@ -235,10 +241,8 @@ class _Supervisor:
                     with self._lock:
                         self.failed = self.failed or message
                     raise SourceFailed(message) from exc
-            if source.live:
-                wait = min(policy.backoff_s * 2 ** (in_row - 1), policy.max_backoff_s)
-                if self.stop.wait(wait):
-                    return
+            if source.live and self.clock.wait(self.stop, policy.backoff(in_row)):
+                return
             with self._lock:
                 self.restarts[source.name] += 1
             log.warning(
@@ -268,13 +272,17 @@ class _LiveMerge:
         stop: threading.Event,
         queue_size: int,
         supervisor: _Supervisor,
+        clock: Clock,
     ) -> None:
         self.sources = sources
         self.supervisor = supervisor
         self.pace = pace
         self.latency_s = latency_s
         self.stop = stop
+        #: the clock of the samples without a pace; the merge's waits run on the pace's
+        self.base_clock = clock if pace is None else pace.clock
         self.queue: queue.Queue[Sample | _End] = queue.Queue(maxsize=queue_size)
+        self.arrived = self.base_clock.event()  #: set when a pump put something
         self.queue_drops = 0  #: samples lost because the queue was full
         self.frames_dropped = 0  #: frames skipped because a newer one was due
         #: called with the released samples' clock after each batch (the status cycle)
@@ -287,13 +295,14 @@ class _LiveMerge:
     def clock(self) -> float:
         """The sample clock now (-inf while a pace has no anchor yet)."""
         if self.pace is None:
-            return time.time()
+            return self.base_clock.now()
         return self.pace.now() if self.pace.started else -math.inf
 
     def _put(self, item: Sample | _End) -> None:
         while not self.stop.is_set():
             try:
                 self.queue.put(item, timeout=0.1)
+                self.arrived.set()
                 return
             except queue.Full:
                 if not isinstance(item, _End):
@@ -307,8 +316,7 @@ class _LiveMerge:
                     return
                 if self.pace is not None and not source.live:
                     self.pace.start(sample.t_s)
-                    wait = self.pace.due_in(sample.t_s)
-                    if wait > 0 and self.stop.wait(wait):
+                    if self.pace.sleep_until(sample.t_s, self.stop):
                         return
                 self._put(sample)
         except SourceFailed:
@@ -336,10 +344,11 @@ class _LiveMerge:
         while not self.stop.is_set():
             if self.supervisor.failed:
                 raise SourceFailed(self.supervisor.failed)
-            try:  # take what arrived, waiting at most poll_s for the first item
-                item: Sample | _End | None = self.queue.get(timeout=poll_s)
-            except queue.Empty:
-                item = None
+            self.arrived.clear()
+            item = self._next()
+            if item is None:  # wait for an arrival, at most poll_s
+                self.base_clock.wait(self.arrived, poll_s)
+                item = self._next()
             while item is not None:
                 if isinstance(item, _End):
                     files_open -= not item.source.live
@@ -348,10 +357,7 @@ class _LiveMerge:
                         self.pace.start(item.t_s)  # a live source's first sample anchors it
                     heapq.heappush(heap, (merge_key(item), seq, item))
                     seq += 1
-                try:
-                    item = self.queue.get_nowait()
-                except queue.Empty:
-                    item = None
+                item = self._next()
             ended = ends_by_itself and files_open == 0
             horizon = math.inf if ended else self.clock() - self.latency_s
             ready: list[Sample] = []
@@ -368,6 +374,12 @@ class _LiveMerge:
                 yield from ((s, True) for s in wd.check(horizon))
             if self.on_tick is not None:
                 self.on_tick(horizon)
+
+    def _next(self) -> Sample | _End | None:
+        try:
+            return self.queue.get_nowait()
+        except queue.Empty:
+            return None
 
     def close(self) -> None:
         for s in self.sources:
@@ -394,12 +406,16 @@ def run(
     progress: Callable[[int, float], None] | None = None,
     keep_running: bool = False,
     supervision: Supervision | None = None,
+    clock: Clock | None = None,
 ) -> RunSummary:
-    """Run the pipeline over the sources into the sinks (module docstring). Raises
-    `SourceFailed` (after closing the sinks) when a source keeps failing."""
+    """Run the pipeline over the sources into the sinks (module docstring). ``clock``: what
+    a live run waits on and, without a pace, its samples' clock (default: the system's;
+    the supervisor's backoffs then on the monotonic clock). Raises `SourceFailed` (after
+    closing the sinks) when a source keeps failing."""
     stop = stop or threading.Event()
     summary = RunSummary()
-    supervisor = _Supervisor(supervision or Supervision(), stop)
+    timer = clock or SystemClock(time.monotonic)
+    supervisor = _Supervisor(supervision or Supervision(), stop, timer)
     state = _LoopState(pipeline, sinks, summary, status_period_s, sources, supervisor.deaths)
     wall0 = time.perf_counter()
     live = pace is not None or any(s.live for s in sources)
@@ -414,6 +430,7 @@ def run(
                 stop=stop,
                 queue_size=queue_size,
                 supervisor=supervisor,
+                clock=clock or SystemClock(),
             )
             merge.on_tick = state.tick
             stream = merge.samples(watchdogs, poll_s=poll_s, keep_running=keep_running)
@@ -508,9 +525,8 @@ class _LoopState:
         self.deaths = deaths  #: the supervisor's (a source's death counts as an input error)
         self.sinks = sinks
         self.summary = summary
-        self.period = status_period_s
         self.sources = sources
-        self.next_status = -math.inf
+        self.cycle = Cycle(status_period_s)  #: the status schedule, on the frames' clock
         self.last_t = -math.inf
         self.new_frame = False
         self.last_gyro_t = -math.inf  #: the newest gyro sample's time (mode reasons)
@@ -587,21 +603,21 @@ class _LoopState:
         summary.confirmations.extend(r.confirmations)
         status = self._status()
         self._each_sink(lambda s: s.on_frame(sample, r, status))
-        if r.t >= self.next_status:
+        if self.cycle.due(r.t):
             self._each_sink(lambda s: s.on_status(r.t, status))
-            self.next_status = r.t + self.period
+            self.cycle.sent(r.t)
         if not injected:
             summary.frame_ms.add((time.perf_counter() - c0) * 1e3)
 
     def tick(self, t: float) -> None:
         """No sample is due up to ``t``: the status, if its period has passed since the last
         one (after the first frame: before it there is nothing to report)."""
-        if self.summary.last is None or not math.isfinite(t) or t < self.next_status:
+        if self.summary.last is None or not math.isfinite(t) or not self.cycle.due(t):
             return
         t = max(t, self.last_t)
         status = self._status()
         self._each_sink(lambda s: s.on_status(t, status))
-        self.next_status = t + self.period
+        self.cycle.sent(t)
 
     def finish(self) -> None:
         """The end of input: the held-back events as alerts, to every sink."""
@@ -611,9 +627,9 @@ class _LoopState:
         t = self.last_t
         if tail and math.isfinite(t):
             self._each_sink(lambda s: s.on_flush(t, tail, status))
-            if t >= self.next_status:
+            if self.cycle.due(t):
                 self._each_sink(lambda s: s.on_status(t, status))
-                self.next_status = t + self.period
+                self.cycle.sent(t)
 
 
 @dataclass

@@ -1,6 +1,7 @@
 """The periodic status line (`StatusMonitor`) and the CAN log player (`CanLogPlayer`, what
 ``run --can-log`` uses): content on synthetic input and on a short daemon run; a garbled log
-and a bus that refuses frames are counted, never fatal."""
+and a bus that refuses frames are counted, never fatal. Daemon runs and the player's pace
+are on virtual time (`VirtualRun`, `VirtualClock`)."""
 
 from __future__ import annotations
 
@@ -16,22 +17,17 @@ from typing import Any, cast
 
 import can
 import pytest
-from tests.daemon.conftest import BusRecorder
+from tests.daemon.conftest import BusRecorder, VirtualRun
 
-from roadpreview.apps.daemon import (
-    Daemon,
-    DaemonOptions,
-    DaemonSummary,
-    iter_summary_lines,
-)
+from roadpreview.apps.daemon import Daemon, DaemonOptions, iter_summary_lines
 from roadpreview.apps.monitoring import StatusMonitor
 from roadpreview.canbus import read_can_log
 from roadpreview.canbus.live import CanLogPlayer, open_bus
+from roadpreview.clock import VirtualClock
 from roadpreview.pipeline import FrameResult, PipelineConfig
 from roadpreview.types import CameraFrame, FusionMode, Status
 
 FILES = Path(__file__).resolve().parents[1] / "files"
-RunInThread = Callable[[Daemon], tuple[threading.Thread, list[DaemonSummary]]]
 
 
 def _fields(line: str) -> dict[str, str]:
@@ -69,17 +65,16 @@ def test_status_line_counts_fps_drops_and_alerts_on_the_frames_clock() -> None:
 def test_status_line_on_a_short_run(
     small_drive: Any,
     virtual_config: Callable[..., PipelineConfig],
-    run_in_thread: RunInThread,
+    virtual_clock: VirtualClock,
     caplog: pytest.LogCaptureFixture,
 ) -> None:
     cfg = virtual_config(status_log_period_s=0.5)
-    options = DaemonOptions(camera_source=str(small_drive.video), can_log=small_drive.can_log())
+    options = DaemonOptions(
+        camera_source=str(small_drive.video), can_log=small_drive.can_log(), clock=virtual_clock
+    )
     daemon = Daemon(small_drive.camera, cfg, options)
     with caplog.at_level(logging.INFO, logger="roadpreview.apps.daemon"):
-        thread, box = run_in_thread(daemon)
-        thread.join(timeout=30.0)
-    assert not thread.is_alive()
-    summary = box[0]
+        summary = VirtualRun(daemon, virtual_clock).finish()
     lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("event=status ")]
     assert len(lines) == summary.status_lines
     duration = int(small_drive.info["n_frames"]) / float(small_drive.info["fps"])
@@ -114,8 +109,8 @@ class _Now:
     def start(self, t0: float) -> None:
         pass
 
-    def due_in(self, t: float) -> float:
-        return -1.0
+    def sleep_until(self, t: float, stop: threading.Event) -> bool:
+        return stop.is_set()
 
 
 @pytest.fixture
@@ -127,22 +122,41 @@ def test_player_restamps_onto_the_anchor_at_recorded_pace(channel: str) -> None:
     recorded = list(read_can_log(FILES / "imu_drive.log"))
     rx = BusRecorder(channel)
     tx = open_bus("virtual", channel, preserve_timestamps=True)
-    anchor = time.time() + 0.2
-    player = CanLogPlayer(FILES / "imu_drive.log", tx, anchor_s=anchor)
-    t_start = time.time()
+    clock = VirtualClock(1000.0)
+    sent_at: list[float] = []  # the player's clock when each frame went out
+    send = tx.send
+
+    def noted(msg: can.Message, timeout: float | None = None) -> None:
+        sent_at.append(clock.now())
+        send(msg, timeout)
+
+    tx.send = noted  # type: ignore[method-assign]
+    anchor = clock.now() + 0.2
+    player = CanLogPlayer(FILES / "imu_drive.log", tx, anchor_s=anchor, clock=clock)
     player.start()
-    assert _join(player, 3.0)
+    assert _waiting(clock)
+    while player.running:  # the player's waits are on the clock: moved on here
+        clock.advance(0.001)
     got = rx.close()
     tx.shutdown()
     assert player.sent == len(recorded) == len(got) == 50
     assert player.errors == 0
     shift = anchor - recorded[0].timestamp
-    for sent, rec in zip(got, recorded, strict=True):
+    for sent, rec, at in zip(got, recorded, sent_at, strict=True):
         assert sent.arbitration_id == rec.arbitration_id
         assert bytes(sent.data) == bytes(rec.data)
         assert sent.timestamp == pytest.approx(rec.timestamp + shift, abs=1e-6)
-    # at recorded pace: the last frame went out 0.19 s after the first, not at once
-    assert time.time() - t_start >= 0.2 + 0.19
+        # at recorded pace: each frame sent when its new stamp is due, not at once
+        assert at == pytest.approx(sent.timestamp, abs=1e-6)
+    assert sent_at[-1] - sent_at[0] == pytest.approx(0.19, abs=0.01)
+
+
+def _waiting(clock: VirtualClock) -> bool:
+    """A thread waits on the clock (it started), within a generous real time."""
+    deadline = time.monotonic() + 30.0
+    while clock.waiting == 0 and time.monotonic() < deadline:
+        time.sleep(0.001)
+    return clock.waiting > 0
 
 
 def _join(player: CanLogPlayer, timeout_s: float) -> bool:
@@ -209,16 +223,16 @@ def test_player_counts_garbled_frames_and_refused_sends(channel: str) -> None:
 def test_daemon_keeps_running_on_a_garbled_can_log(
     small_drive: Any,
     virtual_config: Callable[..., PipelineConfig],
-    run_in_thread: RunInThread,
+    virtual_clock: VirtualClock,
 ) -> None:
     options = DaemonOptions(
-        camera_source=str(small_drive.video), can_log=FILES / "garbled.log", can_log_loop=True
+        camera_source=str(small_drive.video),
+        can_log=FILES / "garbled.log",
+        can_log_loop=True,
+        clock=virtual_clock,
     )
     daemon = Daemon(small_drive.camera, virtual_config(), options)
-    thread, box = run_in_thread(daemon)
-    thread.join(timeout=30.0)
-    assert not thread.is_alive()
-    summary = box[0]
+    summary = VirtualRun(daemon, virtual_clock).finish()
     assert summary.frames_processed == int(small_drive.info["n_frames"])  # to the video's end
     assert summary.can_log_errors >= 3  # garbled lines, every lap
     assert summary.can_log_sent > 0

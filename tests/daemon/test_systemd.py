@@ -1,20 +1,23 @@
 """systemd ``Type=notify``: READY at the first frame, WATCHDOG pings while frames go through
 (and not while the loop hangs or, if asked, while the camera is lost), STATUS, STOPPING.
-systemd's socket is a unix datagram socket bound here (NOTIFY_SOCKET)."""
+systemd's socket is a unix datagram socket bound here (NOTIFY_SOCKET). The daemon runs on
+virtual time (`VirtualRun`): the pings' times are its clock's, noted as each notification
+is sent, and the socket must have received the same notifications in the same order."""
 
 from __future__ import annotations
 
 import itertools
 import os
 import threading
-import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import pytest
+from tests.daemon.conftest import VirtualRun
 
-from roadpreview.apps.daemon import Daemon, DaemonOptions, DaemonSummary
+from roadpreview.apps.daemon import Daemon, DaemonOptions
 from roadpreview.apps.monitoring import SystemdNotifier
+from roadpreview.clock import VirtualClock
 from roadpreview.errors import ConfigError
 from roadpreview.pipeline import PipelineConfig
 from roadpreview.types import CameraFrame, Sample
@@ -24,7 +27,32 @@ if TYPE_CHECKING:
 
     from tests.daemon.conftest import NotifySocket
 
-RunInThread = Callable[[Daemon], tuple[threading.Thread, list[DaemonSummary]]]
+Sent = list[tuple[float, str]]
+
+
+@pytest.fixture
+def sent(monkeypatch: pytest.MonkeyPatch, virtual_clock: VirtualClock) -> Sent:
+    """Every notification the daemon sends, with the virtual time it was sent at."""
+    out: Sent = []
+    notify = SystemdNotifier.notify
+
+    def noted(self: SystemdNotifier, state: str) -> None:
+        out.append((virtual_clock.now(), state))
+        notify(self, state)
+
+    monkeypatch.setattr(SystemdNotifier, "notify", noted)
+    return out
+
+
+def _times(sent: Sent, prefix: str) -> list[float]:
+    return [t for t, m in sent if m.startswith(prefix)]
+
+
+def _on_the_wire(sent: Sent, socket: NotifySocket) -> list[str]:
+    """The notifications as systemd's socket received them: those sent, in order."""
+    msgs = socket.drained(len(sent))
+    assert msgs == [m for _, m in sent]
+    return msgs
 
 
 def test_watchdog_period_comes_from_the_environment_or_the_configuration(
@@ -55,25 +83,20 @@ def test_ready_then_watchdog_pings_status_and_stopping(
     notify_socket: NotifySocket,
     monkeypatch: pytest.MonkeyPatch,
     virtual_config: Callable[..., PipelineConfig],
-    run_in_thread: RunInThread,
+    virtual_clock: VirtualClock,
+    sent: Sent,
 ) -> None:
     monkeypatch.setenv("WATCHDOG_USEC", "200000")  # WatchdogSec=0.2: a ping every 0.1 s
     cfg = virtual_config(status_log_period_s=1.0)
-    daemon = Daemon(
-        small_drive.camera,
-        cfg,
-        DaemonOptions(camera_source=str(small_drive.video), can_log=small_drive.can_log()),
+    options = DaemonOptions(
+        camera_source=str(small_drive.video), can_log=small_drive.can_log(), clock=virtual_clock
     )
-    thread, box = run_in_thread(daemon)
-    thread.join(timeout=30.0)
-    assert not thread.is_alive()
-    time.sleep(0.1)
-    summary = box[0]
-    msgs = [m for _, m in notify_socket.messages]
+    summary = VirtualRun(Daemon(small_drive.camera, cfg, options), virtual_clock).finish()
+    msgs = _on_the_wire(sent, notify_socket)
     assert msgs[0].startswith("READY=1\nSTATUS=running, first frame processed, camera ok")
     assert msgs[-1] == "STOPPING=1"
-    ready = notify_socket.times("READY=1")[0]
-    pings = notify_socket.times("WATCHDOG=1")
+    ready = _times(sent, "READY=1")[0]
+    pings = _times(sent, "WATCHDOG=1")
     assert pings[0] > ready
     # pinged every 0.1 s over the 3 s of video: never a gap systemd would take for a hang
     assert len(pings) >= 20
@@ -84,9 +107,12 @@ def test_ready_then_watchdog_pings_status_and_stopping(
     assert summary.watchdog_withheld == 0
 
 
-def _block_after(daemon: Daemon, n_frames: int, release: threading.Event) -> threading.Event:
+def _block_after(
+    daemon: Daemon, n_frames: int, release: threading.Event, clock: VirtualClock
+) -> threading.Event:
     """Make the pipeline hang (as a deadlock would) at the ``n_frames``-th camera frame
-    until ``release``; returns the event set when it starts hanging."""
+    until ``release`` (waiting on the clock: virtual time goes on meanwhile); returns the
+    event set when it starts hanging."""
     push = daemon.pipeline.push
     seen = [0]
     hanging = threading.Event()
@@ -96,7 +122,7 @@ def _block_after(daemon: Daemon, n_frames: int, release: threading.Event) -> thr
             seen[0] += 1
             if seen[0] == n_frames:
                 hanging.set()
-                release.wait(20.0)
+                clock.wait(release, None)
         return push(sample)
 
     daemon.pipeline.push = hanging_push  # type: ignore[method-assign]
@@ -107,36 +133,34 @@ def test_pings_stop_while_the_loop_hangs_and_resume_after(
     small_drive: Any,
     notify_socket: NotifySocket,
     virtual_config: Callable[..., PipelineConfig],
-    run_in_thread: RunInThread,
-    wait_for: Callable[..., bool],
+    virtual_clock: VirtualClock,
+    sent: Sent,
 ) -> None:
     cfg = virtual_config(watchdog_ping_s=0.05, watchdog_stall_s=0.6, camera_timeout_s=0.3)
-    daemon = Daemon(small_drive.camera, cfg, DaemonOptions(camera_source=str(small_drive.video)))
-    release = threading.Event()
-    hanging = _block_after(daemon, 15, release)
-    thread, box = run_in_thread(daemon)
-    try:
-        assert hanging.wait(10.0)
-        t_hang = time.monotonic()
-        assert wait_for(
-            lambda: any(m.startswith("STATUS=unhealthy") for _, m in notify_socket.messages)
-        )
-        time.sleep(0.6)  # well past the watchdog's period: no ping came in
-        t_check = time.monotonic()
-    finally:
-        release.set()
-    thread.join(timeout=30.0)
-    assert not thread.is_alive()
-    pings = notify_socket.times("WATCHDOG=1")
+    options = DaemonOptions(camera_source=str(small_drive.video), clock=virtual_clock)
+    daemon = Daemon(small_drive.camera, cfg, options)
+    release = virtual_clock.event()
+    hanging = _block_after(daemon, 15, release, virtual_clock)
+    run = VirtualRun(daemon, virtual_clock)
+    assert run.advance_until(hanging.is_set, limit_s=10.0)
+    t_hang = virtual_clock.now()
+    assert run.advance_until(lambda: bool(_times(sent, "STATUS=unhealthy")), limit_s=10.0)
+    run.advance(0.6)  # well past the watchdog's period: no ping went out
+    t_check = virtual_clock.now()
+    release.set()
+    summary = run.finish()
+    _on_the_wire(sent, notify_socket)
+    pings = _times(sent, "WATCHDOG=1")
     before = [t for t in pings if t < t_hang]
     assert len(before) >= 3  # healthy while the first frames went through
     # the last ping came within the stall time after the hang began; none after it
     during = [t for t in pings if t_hang <= t <= t_check]
     assert all(t < t_hang + 0.6 + 0.1 for t in during)
-    unhealthy = [m for _, m in notify_socket.messages if m.startswith("STATUS=unhealthy")]
+    unhealthy = [m for _, m in sent if m.startswith("STATUS=unhealthy")]
     assert unhealthy[0].startswith("STATUS=unhealthy: loop stalled: no frame processed for")
+    assert _times(sent, "STATUS=unhealthy")[0] <= t_hang + 0.6 + 0.05 + 1e-9  # a period late
     assert any(t > t_check for t in pings), "the pings did not resume after the hang"
-    assert box[0].watchdog_withheld == 1
+    assert summary.watchdog_withheld == 1
 
 
 @pytest.mark.parametrize("camera_lost_s", [0.0, 0.5])
@@ -145,8 +169,8 @@ def test_a_lost_camera_stops_the_pings_only_when_configured(
     small_drive: Any,
     notify_socket: NotifySocket,
     virtual_config: Callable[..., PipelineConfig],
-    run_in_thread: RunInThread,
-    wait_for: Callable[..., bool],
+    virtual_clock: VirtualClock,
+    sent: Sent,
     tmp_path: Path,
     first_frames: Callable[[Path, Path, int], Path],
 ) -> None:
@@ -156,25 +180,21 @@ def test_a_lost_camera_stops_the_pings_only_when_configured(
     cfg = virtual_config(
         watchdog_ping_s=0.05, camera_timeout_s=0.3, watchdog_camera_lost_s=camera_lost_s
     )
-    daemon = Daemon(
-        small_drive.camera, cfg, DaemonOptions(camera_source=str(short), stop_at_end=False)
-    )
-    thread, _ = run_in_thread(daemon)
-    try:
-        assert wait_for(lambda: daemon.camera_watchdog.gap_frames > 0)
-        t_lost = time.monotonic()
-        time.sleep(1.2)
-        t_end = time.monotonic()
-    finally:
-        daemon.stop_event.set()
-    thread.join(timeout=10.0)
-    assert not thread.is_alive()
-    late = [t for t in notify_socket.times("WATCHDOG=1") if t_lost + 0.8 < t < t_end]
+    options = DaemonOptions(camera_source=str(short), stop_at_end=False, clock=virtual_clock)
+    daemon = Daemon(small_drive.camera, cfg, options)
+    run = VirtualRun(daemon, virtual_clock)
+    assert run.advance_until(lambda: daemon.camera_watchdog.gap_frames > 0, limit_s=10.0)
+    t_lost = virtual_clock.now()
+    run.advance(1.2)
+    t_end = virtual_clock.now()
+    run.stop()
+    _on_the_wire(sent, notify_socket)
+    late = [t for t in _times(sent, "WATCHDOG=1") if t_lost + 0.8 < t < t_end]
     if camera_lost_s == 0:
         assert len(late) >= 4  # the daemon is alive and says DEGRADED: no restart
     else:
         assert late == []
-        unhealthy = [m for _, m in notify_socket.messages if m.startswith("STATUS=unhealthy")]
+        unhealthy = [m for _, m in sent if m.startswith("STATUS=unhealthy")]
         assert unhealthy == [unhealthy[0]]
         assert unhealthy[0].startswith("STATUS=unhealthy: camera lost for")
 

@@ -3,7 +3,8 @@ is logged, counted and restarted (a file source resumes after its last sample, a
 after a backoff); one that keeps failing ends the run with `SourceFailed` after the sinks
 are closed. The replay's summary lists every input's problems and the inputs that gave
 nothing (exit 1 unless ``--allow-missing``); a TOML that is no TOML text is a config
-error; ``simulate --duration`` sizes the road."""
+error; ``simulate --duration`` sizes the road. Live sources and the supervisor's backoffs
+run on virtual time (`VirtualClock`)."""
 
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from roadpreview.camera import CameraModel
 from roadpreview.canbus.logio import CanLogWriter
 from roadpreview.canbus.mapping import load_mapping
 from roadpreview.cli.main import main
+from roadpreview.clock import VirtualClock
 from roadpreview.errors import ConfigError
 from roadpreview.loop import RunSummary, SourceFailed, Supervision, run
 from roadpreview.pipeline import FrameResult
@@ -84,7 +86,8 @@ class _Closed(Sink):
 
 class _Flaky:
     """A source of frames (or IMU samples) at 10 Hz whose iterator raises at the given
-    sample numbers (counted over all iterations); ``problems`` as the shared contract."""
+    sample numbers (counted over all iterations); ``problems`` as the shared contract.
+    A live one gives a sample every 10 ms of ``clock``, stamped with its time."""
 
     def __init__(
         self,
@@ -96,6 +99,7 @@ class _Flaky:
         live: bool = False,
         imu: bool = False,
         t0: float = 100.0,
+        clock: VirtualClock | None = None,
     ) -> None:
         self.name = name
         self.n = n
@@ -107,7 +111,8 @@ class _Flaky:
         self.iterations = 0
         self.problems: Counter[str] = Counter()
         self._given = 0
-        self._closed = threading.Event()
+        self.clock = clock or VirtualClock()
+        self._closed = self.clock.event()
 
     @property
     def errors(self) -> int:
@@ -125,13 +130,13 @@ class _Flaky:
                 self.problems["corrupt_frame"] += 1
                 raise RuntimeError(f"decoder crashed at sample {i}")
             self._given += 1
-            t = self.t0 + 0.1 * i if not self.live else time.time()
+            t = self.t0 + 0.1 * i if not self.live else self.clock.now()
             if self.imu:
                 yield ImuSample(t + 0.05, (0.0, 0.0, 0.0), (0.0, 0.0, 9.81))
             else:
                 yield CameraFrame(t, None, i)
-            if self.live:
-                time.sleep(0.01)
+            if self.live and self.clock.wait(self._closed, 0.01):
+                return
 
     def close(self) -> None:
         self._closed.set()
@@ -172,25 +177,57 @@ def test_a_file_source_that_raises_once_is_resumed_after_its_last_sample(
     assert sink.summary is summary
 
 
-def test_a_live_source_that_raises_once_is_restarted_and_the_run_goes_on() -> None:
-    camera = _Flaky("camera", 40, raise_at={10}, live=True)
-    stage = _Stage()
-    stop = threading.Event()
-    box: list[RunSummary] = []
-    thread = threading.Thread(
-        target=lambda: box.append(
-            run([camera], stage, stop=stop, supervision=FAST, keep_running=True)
-        )
-    )
+def _in_thread(clock: VirtualClock, call: Callable[[], RunSummary]) -> threading.Thread:
+    """``call`` (a run) in a thread, started once it waits on ``clock``."""
+    box: list[Any] = []
+
+    def target() -> None:
+        try:
+            box.append(call())
+        except BaseException as exc:
+            box.append(exc)
+
+    thread = threading.Thread(target=target, name="loop", daemon=True)
+    thread.box = box  # type: ignore[attr-defined]
     thread.start()
-    deadline = time.monotonic() + 5.0
-    while camera.iterations < 2 or len(_times(stage, CameraFrame)) < 40:
-        assert time.monotonic() < deadline, "the camera was not restarted"
-        time.sleep(0.01)
-    stop.set()
-    thread.join(timeout=5.0)
+    deadline = time.monotonic() + 60.0  # the threads starting, not a timing
+    while clock.waiting < 2 and thread.is_alive():
+        assert time.monotonic() < deadline
+        time.sleep(0.001)
+    return thread
+
+
+def _ended(clock: VirtualClock, thread: threading.Thread, limit_s: float) -> Any:
+    """Move the clock on until ``thread`` ended (at most ``limit_s`` of virtual time); what
+    its call returned or raised."""
+    end = clock.now() + limit_s
+    while thread.is_alive() and clock.now() < end:
+        clock.advance(0.005)
+    thread.join(timeout=60.0)
     assert not thread.is_alive()
-    summary = box[0]
+    return thread.box[0]  # type: ignore[attr-defined]
+
+
+def test_a_live_source_that_raises_once_is_restarted_and_the_run_goes_on() -> None:
+    clock = VirtualClock(1000.0)
+    camera = _Flaky("camera", 40, raise_at={10}, live=True, clock=clock)
+    stage = _Stage()
+    stop = clock.event()
+    thread = _in_thread(
+        clock,
+        lambda: run(
+            [camera], stage, stop=stop, supervision=FAST, keep_running=True, clock=clock
+        ),
+    )
+    end = clock.now() + 5.0
+    while camera.iterations < 2 or len(_times(stage, CameraFrame)) < 40:
+        assert clock.now() < end, "the camera was not restarted"
+        clock.advance(0.005)
+    # frames 0-9 every 10 ms, the death at 0.1 s, a 10 ms backoff, frames 10-39: the
+    # 40th at 0.4 s of the camera's clock (the clock moves in steps of 5 ms)
+    assert clock.now() - 1000.0 == pytest.approx(0.1 + FAST.backoff_s + 0.29, abs=0.006)
+    stop.set()
+    summary = _ended(clock, thread, 1.0)
     assert summary.frames == 40  # 10 before the death, 30 after the restart
     assert summary.thread_deaths == {"camera": 1}
     assert summary.source_problems["camera"]["restarted"] == 1
@@ -199,15 +236,23 @@ def test_a_live_source_that_raises_once_is_restarted_and_the_run_goes_on() -> No
 
 
 def test_a_live_source_that_fails_forever_ends_the_run_with_an_error() -> None:
-    camera = _Flaky("camera", 0, always=True, live=True)
-    imu = _Flaky("imu", 10_000, imu=True, live=True)
+    clock = VirtualClock(1000.0)
+    camera = _Flaky("camera", 0, always=True, live=True, clock=clock)
+    imu = _Flaky("imu", 10_000, imu=True, live=True, clock=clock)
     sink = _Closed()
-    t0 = time.monotonic()
-    with pytest.raises(SourceFailed, match=r"^camera: the source failed 4 times in a row") as exc:
-        run([camera, imu], _Stage(), [sink], supervision=FAST, keep_running=True)
-    assert time.monotonic() - t0 < 3.0  # backoffs of 10-20 ms, not a hang
+    thread = _in_thread(
+        clock,
+        lambda: run(
+            [camera, imu], _Stage(), [sink], supervision=FAST, keep_running=True, clock=clock
+        ),
+    )
+    error = _ended(clock, thread, 10.0)
+    assert isinstance(error, SourceFailed)
+    assert str(error).startswith("camera: the source failed 4 times in a row")
+    # the backoffs, 10 + 20 + 20 ms of the run's clock, and not a hang
+    assert clock.now() - 1000.0 == pytest.approx(0.05, abs=0.011)
     assert camera.iterations == FAST.max_restarts + 1
-    summary = exc.value.summary
+    summary = error.summary
     assert summary is not None
     assert sink.summary is summary
     assert summary.interrupted
@@ -215,7 +260,7 @@ def test_a_live_source_that_fails_forever_ends_the_run_with_an_error() -> None:
     assert "OSError: camera: device gone" in summary.error
     assert summary.thread_deaths == {"camera": 4}
     assert summary.source_problems["camera"] == {"restarted": 3, "thread_died": 4}
-    assert "\n" not in str(exc.value)  # one line for the CLI
+    assert "\n" not in str(error)  # one line for the CLI
 
 
 def test_a_file_source_failing_at_the_same_sample_gives_up() -> None:

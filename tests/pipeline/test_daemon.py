@@ -1,23 +1,21 @@
 """The daemon end to end without hardware: a video file as the camera (paced), a python-can
 ``virtual`` bus fed at recorded pace with the recording's CAN log by the daemon's own player
 (``can_log``, what ``run --can-log`` uses), alerts and status received on another bus object;
-checked against the replay of the same recording."""
+checked against the replay of the same recording. On virtual time (`VirtualRun`): the
+daemon never falls behind, however loaded the machine."""
 
 from __future__ import annotations
 
-import threading
-import time
 import uuid
 from dataclasses import replace
 from pathlib import Path
 
-import can
 import pytest
+from tests.daemon.conftest import SETTLE_S, VIRTUAL_T0, BusRecorder, VirtualRun
 
-from roadpreview.apps.daemon import Daemon, DaemonOptions, DaemonSummary
+from roadpreview.apps.daemon import Daemon, DaemonOptions
 from roadpreview.apps.replay import ReplayInputs, replay
 from roadpreview.canbus import read_can_log
-from roadpreview.canbus.live import open_bus
 from roadpreview.canbus.output import (
     OutputDecoder,
     ReceivedAlert,
@@ -26,6 +24,7 @@ from roadpreview.canbus.output import (
     ReceivedRoadStatus,
     ReceivedStatus,
 )
+from roadpreview.clock import VirtualClock
 from roadpreview.loop import Pace
 from roadpreview.pipeline import PipelineConfig
 from roadpreview.types import FusionMode
@@ -51,44 +50,35 @@ def _config(channel: str, out_channel: str = "") -> PipelineConfig:
     return replace(cfg, can=can_cfg)
 
 
-class _Collector:
+class _Collector(BusRecorder):
     """Receive everything on a bus object (its own notifier) for decoding afterwards."""
 
-    def __init__(self, channel: str) -> None:
-        self.bus = open_bus("virtual", channel)
-        self.reader = can.BufferedReader()
-        self.notifier = can.Notifier(self.bus, [self.reader], timeout=0.05)
-
-    def close(self) -> list[ReceivedOutput]:
-        self.notifier.stop()
-        self.bus.shutdown()
+    def decoded(self) -> list[ReceivedOutput]:
         decoder = OutputDecoder()
         out: list[ReceivedOutput] = []
-        while (msg := self.reader.get_message(timeout=0.0)) is not None:
+        for msg in self.close():
             decoded = decoder.decode(msg)
             if decoded is not None:
                 out.append(decoded)
         return out
 
 
-def _run_in_thread(daemon: Daemon) -> tuple[threading.Thread, list[DaemonSummary]]:
-    box: list[DaemonSummary] = []
-    thread = threading.Thread(target=lambda: box.append(daemon.run()), name="daemon")
-    thread.start()
-    return thread, box
+def _clock() -> VirtualClock:
+    return VirtualClock(VIRTUAL_T0, settle_timeout_s=SETTLE_S)
 
 
 def test_daemon_on_virtual_bus_matches_the_replay(short_demo, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    """The daemon reading the video at recorded pace (half speed: no frame is dropped on a
-    loaded machine) with its CAN log played onto a virtual bus on the same clock by its
-    player gives exactly the replay's frame table: the same frame time stamps, fusion
-    inputs, modes, scores and alerts."""
+    """The daemon reading the video at recorded pace (half speed) with its CAN log played
+    onto a virtual bus on the same clock by its player gives exactly the replay's frame
+    table: the same frame time stamps, fusion inputs, modes, scores and alerts."""
     channel = f"roadpreview-daemon-{uuid.uuid4().hex}"
     recorded_t0 = float(short_demo.info["can_t0_unix_s"])
     n_frames = int(short_demo.info["n_frames"])
     fps = float(short_demo.info["fps"])
     collector = _Collector(channel)
-    pace = Pace(0.5, t0=recorded_t0, wall0=time.time() + START_DELAY_S)
+    clock = _clock()
+    started = clock.now()
+    pace = Pace(0.5, t0=recorded_t0, wall0=started + START_DELAY_S, clock=clock)
     cfg = _config(channel)
     # CAN frames stamped before a frame reach the daemon within 0.2 s (sample clock)
     cfg = replace(cfg, daemon=replace(cfg.daemon, can_latency_s=0.2))
@@ -104,16 +94,16 @@ def test_daemon_on_virtual_bus_matches_the_replay(short_demo, tmp_path: Path) ->
             frame_table=tmp_path / "daemon_frames.csv",
             can_log=short_demo.can_log(),
             video_start_s=recorded_t0,  # the log's stamps stay as recorded
+            clock=clock,
         ),
     )
-    thread, box = _run_in_thread(daemon)
-    thread.join(timeout=90.0)
-    assert not thread.is_alive(), "the daemon did not stop at the end of the video"
+    summary = VirtualRun(daemon, clock).finish()  # stops at the end of the video
     assert daemon.player is not None
     assert not daemon.player.running  # stopped with the daemon
-    received = collector.close()
-    summary = box[0]
-    assert summary.frames_dropped == 0, "the daemon fell behind half speed"
+    received = collector.decoded()
+    # paced: the run took the video's length at half speed on the daemon's clock
+    assert clock.now() - started >= START_DELAY_S + (n_frames - 1) / fps / pace.rate
+    assert summary.frames_dropped == 0, "the daemon fell behind"
     assert summary.camera_read_failures == 0
     assert summary.frames_processed == n_frames
     assert summary.frames_out_of_order == 0
@@ -139,10 +129,11 @@ def test_daemon_on_virtual_bus_matches_the_replay(short_demo, tmp_path: Path) ->
     assert summary.mode_changes == ref.mode_changes
     assert summary.alerts == ref.alerts
 
-    # status: about 10 Hz over the run, E2E-valid (OutputDecoder checks CRC and counter)
+    # status: 10 Hz of the frames' clock over the run, E2E-valid (OutputDecoder checks CRC
+    # and counter), stamped on the frames' clock
     statuses = [m for m in received if isinstance(m, ReceivedStatus)]
-    span = statuses[-1].t_rx_s - statuses[0].t_rx_s  # wall time: half speed
-    assert span > 0.8 * n_frames / fps / pace.rate
+    span = statuses[-1].t_rx_s - statuses[0].t_rx_s
+    assert span > 0.8 * n_frames / fps
     assert len(statuses) == pytest.approx(n_frames / fps / 0.1 + 1, rel=0.2)
     assert statuses[-1].mode == summary.mode_changes[-1][1]  # the pipeline's mode
     assert statuses[-1].alert_count == len(summary.alerts) % 16
@@ -177,19 +168,17 @@ def test_stop_event_shuts_down_cleanly_and_closes_the_log(short_demo, tmp_path: 
     out_channel = f"roadpreview-daemon-out-{uuid.uuid4().hex}"
     collector = _Collector(out_channel)
     log_path = tmp_path / "alerts.asc"
+    clock = _clock()
     daemon = Daemon(
         short_demo.camera,
         _config(channel, out_channel),
-        DaemonOptions(camera_source=str(short_demo.video), alerts_log=log_path),
+        DaemonOptions(camera_source=str(short_demo.video), alerts_log=log_path, clock=clock),
     )
     assert daemon.output_bus is not daemon.input_bus
-    thread, box = _run_in_thread(daemon)
-    time.sleep(1.5)
-    daemon.stop_event.set()  # what SIGINT / SIGTERM do
-    thread.join(timeout=10.0)
-    assert not thread.is_alive()
-    received = collector.close()
-    summary = box[0]
+    run = VirtualRun(daemon, clock)
+    run.advance(1.5)
+    summary = run.stop()  # what SIGINT / SIGTERM do
+    received = collector.decoded()
     assert summary.interrupted
     assert 0 < summary.frames_processed < int(short_demo.info["n_frames"])
     assert daemon.input_bus._is_shutdown
@@ -207,19 +196,13 @@ def test_camera_watchdog_reports_vision_failure(short_demo, tmp_path: Path, firs
     collector = _Collector(channel)
     cfg = _config(channel)
     cfg = replace(cfg, daemon=replace(cfg.daemon, camera_timeout_s=0.3))
-    daemon = Daemon(
-        short_demo.camera, cfg, DaemonOptions(camera_source=str(short), stop_at_end=False)
-    )
-    thread, box = _run_in_thread(daemon)
-    deadline = time.monotonic() + 10.0
-    while daemon.camera_watchdog.gap_frames < 5 and time.monotonic() < deadline:
-        time.sleep(0.05)
-    time.sleep(0.3)  # a few status periods after the watchdog fired
-    daemon.stop_event.set()
-    thread.join(timeout=10.0)
-    assert not thread.is_alive()
-    received = collector.close()
-    summary = box[0]
+    clock = _clock()
+    options = DaemonOptions(camera_source=str(short), stop_at_end=False, clock=clock)
+    run = VirtualRun(Daemon(short_demo.camera, cfg, options), clock)
+    assert run.advance_until(lambda: run.daemon.camera_watchdog.gap_frames >= 5, limit_s=10.0)
+    run.advance(0.3)  # a few status periods after the watchdog fired
+    summary = run.stop()
+    received = collector.decoded()
     assert summary.camera_timeouts == 1
     assert summary.camera_gap_frames >= 5
     assert summary.frames_processed + summary.frames_dropped == 10

@@ -2,14 +2,13 @@
 and its fast paths give the numbers of the plain ones.
 
 The schedule must depend only on the frames' time stamps, never on the time the work
-takes (replay and daemon give the same results); a detection of the tracked lead found
-on an earlier frame is moved with the lead before it is used; a cut-in is still caught
-after two finder runs.
+takes (replay and daemon give the same results: a slow finder is slow on an injected
+clock, not by sleeping); a detection of the tracked lead found on an earlier frame is
+moved with the lead before it is used; a cut-in is still caught after two finder runs.
 """
 
 from __future__ import annotations
 
-import time
 import warnings
 from collections.abc import Generator
 from dataclasses import asdict
@@ -36,15 +35,32 @@ def _texture(seed: int = 0, width: int = 400) -> np.ndarray:
     return np.asarray(cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR), np.uint8)
 
 
+class Stopwatch:
+    """A clock for the front end's profiling that moves only when told (``t``, s)."""
+
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
 class ScriptedFinder:
     """A sliced finder (three slices, like the motion finder) with scripted detections;
-    records which frame each slice ran on, and may sleep to be slow."""
+    records which frame each slice ran on, and may be slow: each of its slices takes
+    ``slice_s`` of ``clock``."""
 
     name = "scripted"
 
-    def __init__(self, script: dict[int, list[Detection]], sleep_s: float = 0.0) -> None:
+    def __init__(
+        self,
+        script: dict[int, list[Detection]],
+        slice_s: float = 0.0,
+        clock: Stopwatch | None = None,
+    ) -> None:
         self.script = script  # start frame index -> detections (else the last entry before)
-        self.sleep_s = sleep_s
+        self.slice_s = slice_s
+        self.clock = clock or Stopwatch()
         self.last_reason = ""
         self.slices: list[tuple[int, int]] = []  # (start frame, slice 1..3)
         self.current = 0
@@ -65,7 +81,7 @@ class ScriptedFinder:
         start = context.index
         for k in (1, 2):
             self.slices.append((start, k))
-            time.sleep(self.sleep_s)
+            self.clock.t += self.slice_s
             yield
         self.slices.append((start, 3))
         return self._detections(start)
@@ -80,7 +96,8 @@ class ScriptedFinder:
 def _run(
     finder: ScriptedFinder, frames: list[np.ndarray], fps: float, **config: object
 ) -> list[FrameVision]:
-    fe = VisionFrontEnd(CAM, VisionConfig(**config), finder=finder)  # type: ignore[arg-type]
+    cfg = VisionConfig(**config)  # type: ignore[arg-type]
+    fe = VisionFrontEnd(CAM, cfg, finder=finder, clock=finder.clock)
     return [fe.process(i / fps, f) for i, f in enumerate(frames)]
 
 
@@ -116,7 +133,13 @@ def test_the_schedule_does_not_depend_on_the_time_taken() -> None:
     frames = [_texture()[:, k : k + 320] for k in range(0, 40, 2)]
     script = {0: [Detection(LEAD, 0.9, "vehicle")]}
     fast = _run(ScriptedFinder(script), frames, 30.0)
-    slow = _run(ScriptedFinder(script, sleep_s=0.02), frames, 30.0)  # slices of 20 ms
+    slow = _run(ScriptedFinder(script, slice_s=0.02), frames, 30.0)  # slices of 20 ms
+    # the slow finder's first two slices of a run took 20 ms each on the front end's
+    # clock (the whole first run and the last slices no time) ...
+    finder_ms = [o.timings_ms["finder"] for o in slow if o.finder_ran]
+    assert finder_ms == pytest.approx([0.0, 20.0, 20.0, 0.0, 20.0, 20.0])
+    assert max(o.timings_ms["finder"] for o in fast) == 0.0
+    # ... and the schedule is the fast finder's
     assert [(o.index, o.detected_index, o.finder_ran) for o in fast] == [
         (o.index, o.detected_index, o.finder_ran) for o in slow
     ]

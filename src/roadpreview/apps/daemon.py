@@ -6,9 +6,13 @@ pipeline, alerts and the periodic status out on CAN. A composition of the run lo
   recorded pace; ``[daemon] camera_width/height/fps`` requested, the calibration's size
   required) and the input bus (`CanBusSource`, decoded through the DBC and the mapping as
   frames arrive), optionally fed from a CAN log by a `CanLogPlayer` (``can_log``);
-* sinks: the output bus (`CanBusSink`: RP_ALERT + RP_ALERT_DETAIL per alert, RP_CONFIRM,
-  RP_STATUS + RP_ROAD_STATUS every status period; send errors logged and counted), the
-  sent frames optionally recorded to a CAN log, and structured log lines;
+* sinks: the output bus (`CanBusSink`: RP_ALERT + RP_ALERT_DETAIL per alert, RP_CONFIRM
+  from the loop's thread; RP_STATUS + RP_ROAD_STATUS (+ RP_INPUT_STATUS) every status
+  period from a cyclic sender thread of its own, `StatusCycle`, fed with the loop's
+  newest status; send errors logged and counted; Python's thread switch interval is
+  ``daemon.switch_interval_s`` while the daemon runs, so that thread waits little for
+  the interpreter), the sent frames optionally recorded to a CAN log, and structured log
+  lines;
 * watchdogs: the camera (no frame for ``daemon.camera_timeout_s``: image-less frames
   every status period, a vision failure for the fusion, so the status keeps going out)
   and the IMU (no gyro sample for ``can.imu_timeout_s``: logged and counted; the
@@ -17,20 +21,24 @@ pipeline, alerts and the periodic status out on CAN. A composition of the run lo
   a source whose iterator raises (logged ``event=thread_died``, counted, with backoff;
   `roadpreview.loop.Supervision`); a source that keeps failing ends the run with
   `SourceFailed`, which `Daemon.run` raises after cleaning up, so ``roadpreview run``
-  exits non-zero and systemd's ``Restart=on-failure`` starts it again. A send error on
-  the output bus costs that frame only (`CanBusSink`); the status goes out on the loop's
-  schedule, so the next period's RP_STATUS is sent;
+  exits non-zero and systemd's ``Restart=on-failure`` starts it again. The status
+  sender is supervised the same way (``thread_deaths`` ``can-status``; giving up stops
+  the daemon with `ThreadFailed`). A send error on the output bus costs that frame only
+  (`CanBusSink`); the status sender goes on, so the next period's RP_STATUS is sent;
 * signals: SIGINT/SIGTERM set `Daemon.stop_event` (`install_signal_handlers`);
 * operations: a status line every ``daemon.status_log_period_s`` (`StatusMonitor`) and
   systemd ``Type=notify`` (`SystemdNotifier`): READY at the first frame, WATCHDOG pings
-  while frames go through, STATUS, STOPPING (docs/daemon.md).
+  while frames go through (`WatchdogPinger`), STATUS, STOPPING (docs/daemon.md).
 
 The clock: frame and CAN time stamps must be on one clock. A device or stream frame is
 stamped ``time.time()`` when read, as python-can stamps received frames on
 ``socketcan`` and ``virtual``. A file camera is stamped by the video's clock rule
 (`roadpreview.sources.video`) from ``camera_start_s`` (default: when it is opened) and
 released at that wall time (``pace``), so it behaves like a live camera; a CAN log
-replayed on the bus on the same clock lines up. The loop processes a frame
+replayed on the bus on the same clock lines up. Every wait and every reading of the time
+goes through `DaemonOptions.clock` (the system's clock by default; a
+`roadpreview.clock.VirtualClock` in tests, which then run on virtual time). The loop
+processes a frame
 ``daemon.can_latency_s`` after its stamp, so CAN frames stamped before it are pushed
 first, as in a replay; when it falls behind, only the newest frame is processed.
 Logging is structured: ``event=... key=value ...``.
@@ -40,6 +48,7 @@ from __future__ import annotations
 
 import logging
 import math
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -47,16 +56,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import can
+
 from roadpreview.apps.monitoring import (
     CameraWatchdog,
     ImuWatchdog,
     LogSink,
     StatusMonitor,
     SystemdNotifier,
+    WatchdogPinger,
     kv,
 )
 from roadpreview.camera import CameraModel
 from roadpreview.canbus.live import CanLogPlayer, open_bus
+from roadpreview.clock import Clock, SystemClock
 from roadpreview.errors import ConfigError, InputDataError, OperationError
 from roadpreview.loop import (
     FrameTimes,
@@ -70,7 +83,7 @@ from roadpreview.loop import (
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pipeline.pipeline import Pipeline
 from roadpreview.sinks import Sink
-from roadpreview.sinks.can import CanBusSink, repetition_config
+from roadpreview.sinks.can import CanBusSink, StatusCycle, repetition_config
 from roadpreview.sinks.files import FrameTableSink
 from roadpreview.sources.can import CanBusSource, make_decoder
 from roadpreview.sources.clockguard import ClockGuard
@@ -81,6 +94,7 @@ from roadpreview.sources.video import (
     camera_kind,
     open_camera,
 )
+from roadpreview.supervision import ThreadFailed
 from roadpreview.types import Alert, CameraFrame, FusionMode
 
 log = logging.getLogger(__name__)
@@ -117,8 +131,12 @@ class DaemonOptions:
     #: a file camera (and its CAN log): play at this multiple of the recorded speed; the
     #: time stamps stay on the recording's clock (``pace`` overrides it)
     rate: float = 1.0
-    #: how a failing camera or bus reader is restarted before the daemon gives up
+    #: how a failing camera or bus reader (and the status sender) is restarted before
+    #: the daemon gives up
     supervision: Supervision = field(default_factory=Supervision)
+    #: the clock the daemon reads and waits on (None: the system's, Unix time, with the
+    #: timeouts and the watchdog on the monotonic clock); a test's `VirtualClock`
+    clock: Clock | None = None
 
 
 @dataclass
@@ -197,7 +215,10 @@ class Daemon:
     ) -> None:
         self.config = cfg = config or PipelineConfig()
         self.options = opts = options or DaemonOptions()
-        self.stop_event = threading.Event()
+        #: the frames' clock (Unix time) and the one timeouts and pings are measured on
+        self.clock: Clock = opts.clock or SystemClock()
+        self.timer: Clock = opts.clock or SystemClock(time.monotonic)
+        self.stop_event = self.clock.event()
         self.pipeline = Pipeline(camera, cfg)
         self.summary = DaemonSummary()
         self.camera_source = opts.camera_source or cfg.daemon.camera_source
@@ -211,8 +232,8 @@ class Daemon:
         if not opts.rate > 0:
             raise ConfigError(f"rate {opts.rate}: must be positive")
         start_s = opts.camera_start_s
-        if start_s is None and opts.can_log is not None:
-            start_s = time.time() + PLAYER_START_DELAY_S
+        if start_s is None:  # a file camera starts now (a device ignores it)
+            start_s = self.clock.now() + (PLAYER_START_DELAY_S if opts.can_log else 0.0)
         self.camera = open_camera(
             self.camera_source,
             start_s=start_s,
@@ -241,20 +262,33 @@ class Daemon:
         c = cfg.can
         self.player: CanLogPlayer | None = None
         self.player_bus: Any = None
-        self.input_bus = open_bus(c.input_interface, c.input_channel)
+        self.input_bus = _open_bus(c.input_interface, c.input_channel)
         self.output_bus = self.input_bus
+        self._thread_failure = ""  # why a supervised thread of the daemon gave up
         try:
             if c.output_interface or c.output_channel:
-                self.output_bus = open_bus(
+                self.output_bus = _open_bus(
                     c.output_interface or c.input_interface, c.output_channel or c.input_channel
                 )
             decoder = make_decoder(c.dbc, c.mapping, self.config.plausibility)
-            self.can_in = CanBusSource(self.input_bus, decoder, queue_size=d.can_queue_size)
+            self.can_in = CanBusSource(
+                self.input_bus, decoder, queue_size=d.can_queue_size, clock=self.timer
+            )
+            # the status on the frames' clock: a file camera's pace, else the monotonic
+            # clock with the time stamps on the system's
+            pace = self.pace
             self.output = CanBusSink(
                 self.output_bus,
                 detector=cfg.anomaly.detector,
                 record=opts.alerts_log,
                 repetition=repetition_config(cfg),
+                cycle=StatusCycle(
+                    clock=pace if pace is not None else self.timer,
+                    period_s=c.status_period_s,
+                    stamp=None if pace is not None else self.clock.now,
+                    supervision=opts.supervision,
+                    on_failed=self._thread_failed,
+                ),
             )
             if opts.can_log is not None:
                 self.player = self._player(opts.can_log)
@@ -263,6 +297,7 @@ class Daemon:
             self.camera.close()
             raise
         self.monitor: StatusMonitor | None = None  #: the running daemon's health (`run`)
+        self.pinger: WatchdogPinger | None = None  #: systemd's watchdog pings (`run`)
         self._ran = False
 
     def _check_camera(self, camera: CameraModel) -> None:
@@ -309,9 +344,7 @@ class Daemon:
                 f"a pace of {self.pace.rate} x recorded speed needs the virtual CAN "
                 f"interface: {c.input_interface} stamps frames on arrival, on the wall clock"
             )
-        self.player_bus = open_bus(
-            c.input_interface, c.input_channel, **({"preserve_timestamps": True} if virtual else {})
-        )
+        self.player_bus = _open_bus(c.input_interface, c.input_channel)
         return CanLogPlayer(
             path,
             self.player_bus,
@@ -319,6 +352,7 @@ class Daemon:
             anchor_log_s=self.options.video_start_s,
             schedule=self.pace,
             loop=self.options.can_log_loop,
+            clock=self.clock,
         )
 
     def _pace(self) -> Pace | None:
@@ -326,7 +360,7 @@ class Daemon:
         if isinstance(self.camera, CameraDeviceSource) or self.options.pace is not None:
             return self.options.pace
         start = self.camera.start_s
-        return Pace(self.options.rate, t0=start, wall0=start)
+        return Pace(self.options.rate, t0=start, wall0=start, clock=self.clock)
 
     def run(self) -> DaemonSummary:
         """Process until stopped; return the summary (also logged)."""
@@ -353,30 +387,44 @@ class Daemon:
             self._status_fields,
             on_ready=lambda frame: self._ready(notifier, frame),
             on_line=lambda line: notifier.notify("STATUS=" + line.removeprefix("event=status ")),
+            clock=self.timer.now,
         )
         sinks: list[Sink] = [self.output, LogSink(), monitor]
         if self.options.frame_table is not None:
             sinks.append(FrameTableSink(self.options.frame_table))
         result: RunSummary | None = None
-        supervisor_done = threading.Event()
-        supervisor: threading.Thread | None = None
+        pinger_done = self.timer.event()
+        pinger_thread: threading.Thread | None = None
         ping_s = SystemdNotifier.watchdog_period_s(d.watchdog_ping_s) if notifier.enabled else 0.0
+        self.pinger = WatchdogPinger(
+            notifier,
+            monitor,
+            ping_s,
+            stall_s=d.watchdog_stall_s,
+            camera_lost_s=d.watchdog_camera_lost_s,
+            clock=self.timer,
+        )
+        # a shorter thread switch interval: the status sender waits less for the interpreter
+        switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(d.switch_interval_s)
         try:
             if ping_s > 0:
-                supervisor = threading.Thread(
-                    target=self._supervise,
-                    args=(notifier, monitor, ping_s, supervisor_done),
+                pinger_thread = threading.Thread(
+                    target=self.pinger.run,
+                    args=(pinger_done,),
                     name="systemd-watchdog",
                     daemon=True,
                 )
-                supervisor.start()
+                pinger_thread.start()
             if self.player is not None:
                 self.player.start()
             # the bus's stamps against the loop's clock as frames arrive: stray stamps
             # dropped alone, clock steps taken off (`ClockGuard`)
             pace = self.pace
             clock = (
-                time.time if pace is None else (lambda: pace.now() if pace.started else math.nan)
+                self.clock.now
+                if pace is None
+                else (lambda: pace.now() if pace.started else math.nan)
             )
             result = run(
                 [self.camera, ClockGuard(self.can_in, clock=clock)],
@@ -389,6 +437,7 @@ class Daemon:
                 latency_s=d.can_latency_s,
                 keep_running=not (self.options.stop_at_end and not self.camera.live),
                 supervision=self.options.supervision,
+                clock=self.options.clock,
             )
         except SourceFailed as exc:  # a source kept failing: summarised, then raised
             result = exc.summary
@@ -396,16 +445,24 @@ class Daemon:
             raise
         finally:
             notifier.notify("STOPPING=1")
-            supervisor_done.set()
-            if supervisor is not None:
-                supervisor.join(timeout=5.0)
+            pinger_done.set()
+            if pinger_thread is not None:
+                pinger_thread.join(timeout=5.0)
             notifier.close()
             if self.player is not None:
                 self.player.stop()
             self._shutdown_buses()
+            sys.setswitchinterval(switch_interval)
             self._summarise(result)
             log.info(kv("daemon_stop", **self.summary.fields()))
+        if self._thread_failure:  # the status sender kept dying: stopped, then raised
+            raise ThreadFailed(self._thread_failure)
         return self.summary
+
+    def _thread_failed(self, message: str) -> None:
+        """A supervised thread of the daemon gave up: the daemon stops and `run` raises."""
+        self._thread_failure = message
+        self.stop_event.set()
 
     def _ready(self, notifier: SystemdNotifier, frame: CameraFrame) -> None:
         """The first frame went through: systemd's READY=1 (the camera and the buses are
@@ -413,33 +470,6 @@ class Daemon:
         camera = "ok" if frame.index >= 0 else "lost"
         log.info(kv("ready", t=frame.t_s, camera=camera))
         notifier.notify(f"READY=1\nSTATUS=running, first frame processed, camera {camera}")
-
-    def _supervise(
-        self,
-        notifier: SystemdNotifier,
-        monitor: StatusMonitor,
-        period_s: float,
-        done: threading.Event,
-    ) -> None:
-        """Ping systemd's watchdog every ``period_s`` while the loop is healthy
-        (`StatusMonitor.unhealthy`); withhold the pings (logged once) while it is not, so
-        systemd restarts a stalled daemon (``Restart=on-failure``)."""
-        d = self.config.daemon
-        withheld = ""
-        while not done.wait(period_s):
-            if not monitor.ready:
-                continue  # systemd starts the watchdog at READY=1
-            why = monitor.unhealthy(time.monotonic(), d.watchdog_stall_s, d.watchdog_camera_lost_s)
-            if not why:
-                notifier.notify("WATCHDOG=1")
-                if withheld:
-                    log.warning(kv("watchdog_resumed", after=withheld))
-                    withheld = ""
-            elif not withheld:
-                withheld = why
-                self.summary.watchdog_withheld += 1
-                log.error(kv("watchdog_withheld", reason=why))
-                notifier.notify(f"STATUS=unhealthy: {why}")
 
     def _status_fields(self) -> dict[str, Any]:
         """The daemon's part of the periodic status line (`StatusMonitor`)."""
@@ -469,6 +499,13 @@ class Daemon:
             s.can_queue_drops = r.queue_drops
             s.thread_deaths = dict(r.thread_deaths)
             s.source_problems = {name: dict(p) for name, p in r.source_problems.items()}
+        sender = self.output.status_sender
+        if sender is not None and sender.deaths:
+            s.thread_deaths[sender.name] = sender.deaths
+        if self._thread_failure:
+            s.error = self._thread_failure
+        if self.pinger is not None:
+            s.watchdog_withheld = self.pinger.withheld
         s.camera_read_failures = self.camera.errors
         s.status_lines = self.monitor.lines if self.monitor is not None else 0
         if self.player is not None:
@@ -493,6 +530,13 @@ class Daemon:
                 bus.shutdown()
             except Exception:
                 log.exception(kv("bus_shutdown_failed", channel=str(bus.channel_info)))
+
+
+def _open_bus(interface: str, channel: str | int | None) -> can.BusABC:
+    """A bus of the daemon; python-can's ``virtual`` one keeps the time stamps the daemon
+    gives its frames (the frames' clock), as a real bus stamps them on the wire."""
+    keep = {"preserve_timestamps": True} if interface == "virtual" else {}
+    return open_bus(interface, channel, **keep)
 
 
 def iter_summary_lines(summary: DaemonSummary) -> Iterator[str]:

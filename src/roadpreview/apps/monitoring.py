@@ -1,19 +1,23 @@
 """The daemon's supervision parts: structured log lines (`kv`), the camera and IMU
 watchdogs, the log and status sinks (`LogSink`, `StatusMonitor`: the periodic one-line
-status, also sent to systemd) and `SystemdNotifier` (``sd_notify``: READY, STATUS,
-WATCHDOG, STOPPING). `roadpreview.apps.daemon` composes them with the run loop."""
+status, also sent to systemd), `SystemdNotifier` (``sd_notify``: READY, STATUS,
+WATCHDOG, STOPPING) and `WatchdogPinger` (WATCHDOG=1 while the loop is healthy).
+`roadpreview.apps.daemon` composes them with the run loop. The health times are on an
+injected clock (the monotonic clock in the product, virtual time in tests)."""
 
 from __future__ import annotations
 
 import logging
 import math
 import os
+import threading
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import sdnotify
 
+from roadpreview.clock import Clock
 from roadpreview.pipeline.pipeline import FrameResult
 from roadpreview.sinks import Sink
 from roadpreview.types import Alert, CameraFrame, ImuSample, Sample, Status
@@ -157,7 +161,8 @@ class StatusMonitor(Sink):
     processed (the gaps in their indices: the loop fell behind, or a frame came out of
     order). ``on_ready`` is called once, at the first frame processed (a real one, or the
     camera watchdog's image-less one when the camera is silent from the start).
-    `unhealthy` says why the watchdog pings should stop, if they should.
+    `unhealthy` says why the watchdog pings should stop, if they should; the frames'
+    arrival is timed on ``clock`` (default ``time.monotonic``).
     """
 
     def __init__(
@@ -167,24 +172,26 @@ class StatusMonitor(Sink):
         *,
         on_ready: Callable[[CameraFrame], None] | None = None,
         on_line: Callable[[str], None] | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.period_s = period_s
         self.fields = fields
         self.on_ready = on_ready
         self.on_line = on_line
+        self.clock = clock
         self.frames = 0  #: camera frames processed (image-less injected ones not counted)
         self.drops = 0  #: camera frames read but not processed
         self.alerts = 0  #: alerts raised (flushed ones included)
         self.lines = 0  #: status lines logged
         self.ready = False
-        self.last_frame_mono = math.nan  #: time.monotonic() of the last frame processed
-        self.last_camera_mono = math.nan  #: ... of the last real camera frame processed
+        self.last_frame_mono = math.nan  #: ``clock()`` at the last frame processed
+        self.last_camera_mono = math.nan  #: ... at the last real camera frame processed
         self._t0 = math.nan  # the previous line's frame time and frame count
         self._frames0 = 0
         self._next = -math.inf
 
     def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
-        now = time.monotonic()
+        now = self.clock()
         self.last_frame_mono = now
         if frame.index >= 0:
             self.frames += 1
@@ -227,7 +234,7 @@ class StatusMonitor(Sink):
             self.on_line(line)
 
     def unhealthy(self, now_mono: float, stall_s: float, camera_lost_s: float = 0.0) -> str:
-        """Why the daemon is unhealthy at ``now_mono`` (``time.monotonic()``), or "": no
+        """Why the daemon is unhealthy at ``now_mono`` (on ``clock``), or "": no
         frame processed for ``stall_s`` (the loop hangs; a lost camera still gives an
         image-less frame every status period), or no camera frame for ``camera_lost_s``
         (0: never a reason)."""
@@ -278,3 +285,49 @@ class SystemdNotifier:
             log.warning(kv("watchdog_usec_invalid", value=os.environ.get("WATCHDOG_USEC", "")))
             return 0.0
         return usec / 2e6 if usec > 0 else 0.0
+
+
+class WatchdogPinger:
+    """systemd's watchdog: ``WATCHDOG=1`` every ``period_s`` of ``clock`` while the loop is
+    healthy (`StatusMonitor.unhealthy` with ``stall_s`` and ``camera_lost_s``); the pings
+    are withheld (logged once, counted in ``withheld``, ``STATUS=unhealthy: ...``) while it
+    is not, so that systemd restarts a stalled daemon (``Restart=on-failure``), and resume
+    (logged) when it is healthy again. No ping before READY=1 (``monitor.ready``: systemd
+    starts its watchdog then). `run` until ``done`` is set (a thread of its own)."""
+
+    def __init__(
+        self,
+        notifier: SystemdNotifier,
+        monitor: StatusMonitor,
+        period_s: float,
+        *,
+        stall_s: float,
+        camera_lost_s: float = 0.0,
+        clock: Clock,
+    ) -> None:
+        self.notifier = notifier
+        self.monitor = monitor
+        self.period_s = period_s
+        self.stall_s = stall_s
+        self.camera_lost_s = camera_lost_s
+        self.clock = clock
+        self.withheld = 0  #: times the pings were withheld
+        self.pings = 0  #: WATCHDOG=1 sent
+
+    def run(self, done: threading.Event) -> None:
+        withheld = ""
+        while not self.clock.wait(done, self.period_s):
+            if not self.monitor.ready:
+                continue  # systemd starts the watchdog at READY=1
+            why = self.monitor.unhealthy(self.clock.now(), self.stall_s, self.camera_lost_s)
+            if not why:
+                self.notifier.notify("WATCHDOG=1")
+                self.pings += 1
+                if withheld:
+                    log.warning(kv("watchdog_resumed", after=withheld))
+                    withheld = ""
+            elif not withheld:
+                withheld = why
+                self.withheld += 1
+                log.error(kv("watchdog_withheld", reason=why))
+                self.notifier.notify(f"STATUS=unhealthy: {why}")

@@ -19,6 +19,7 @@ BENCHMARKS: dict[str, str] = {
     "pipeline": "roadpreview.bench.pipeline",
     "soak": "roadpreview.bench.soak",
     "batch": "roadpreview.bench.batch",
+    "status": "roadpreview.bench.status",
 }
 
 #: not run by ``roadpreview bench all``: they take many minutes (the soak's 30 min drive;

@@ -24,7 +24,6 @@ import logging
 import math
 import queue
 import threading
-import time
 from collections.abc import Iterable
 from pathlib import Path
 from types import TracebackType
@@ -33,6 +32,7 @@ from typing import Any, Protocol
 import can
 
 from roadpreview.canbus.logio import CanLogReader
+from roadpreview.clock import Clock, SystemClock, sleep_until
 from roadpreview.errors import ConfigError, InputDataError, MissingDependencyError, OperationError
 
 log = logging.getLogger(__name__)
@@ -58,20 +58,26 @@ def open_bus(interface: str, channel: str | int | None = None, **kwargs: Any) ->
 
 
 class BoundedQueueListener(can.Listener):
-    """A listener that only queues frames; when the queue is full it drops and counts them."""
+    """A listener that only queues frames; when the queue is full it drops and counts them.
+    ``arrived`` is set with every frame queued (a consumer that waits on a clock clears it
+    before it looks at the queue)."""
 
-    def __init__(self, maxsize: int = DEFAULT_QUEUE_SIZE) -> None:
+    def __init__(
+        self, maxsize: int = DEFAULT_QUEUE_SIZE, *, arrived: threading.Event | None = None
+    ) -> None:
         if maxsize < 1:
             raise ConfigError(f"queue size {maxsize}: must be >= 1")
         self.queue: queue.Queue[can.Message] = queue.Queue(maxsize=maxsize)
         self.dropped = 0  #: frames lost because the queue was full
         self.errors = 0  #: exceptions the bus reported to the notifier
+        self.arrived = arrived or threading.Event()
         self._lock = threading.Lock()
 
     def on_message_received(self, msg: can.Message) -> None:
         """Queue the frame (the notifier thread calls this: nothing else happens here)."""
         try:
             self.queue.put_nowait(msg)
+            self.arrived.set()
         except queue.Full:
             with self._lock:
                 self.dropped += 1
@@ -113,9 +119,10 @@ class CanReceiver:
         maxsize: int = DEFAULT_QUEUE_SIZE,
         extra_listeners: Iterable[can.Listener] = (),
         timeout_s: float = 0.1,
+        arrived: threading.Event | None = None,
     ) -> None:
         self.bus = bus
-        self.listener = BoundedQueueListener(maxsize)
+        self.listener = BoundedQueueListener(maxsize, arrived=arrived)
         self._notifier = can.Notifier(bus, [self.listener, *extra_listeners], timeout=timeout_s)
 
     @property
@@ -179,19 +186,23 @@ class Schedule(Protocol):
         """Anchor the schedule at the first time stamp if it is not anchored yet."""
         ...
 
-    def due_in(self, t: float) -> float:
-        """Seconds until time stamp ``t`` is due (negative: overdue)."""
+    def sleep_until(self, t: float, stop: threading.Event) -> bool:
+        """Wait until time stamp ``t`` is due or ``stop`` is set; True if stopped."""
         ...
 
 
 class WallClock:
-    """The default `Schedule`: a time stamp is due at that Unix time."""
+    """The default `Schedule`: a time stamp is due when ``clock`` (default: the system's,
+    Unix time) reads it."""
+
+    def __init__(self, clock: Clock | None = None) -> None:
+        self.clock = clock or SystemClock()
 
     def start(self, t0: float) -> None:
         pass
 
-    def due_in(self, t: float) -> float:
-        return t - time.time()
+    def sleep_until(self, t: float, stop: threading.Event) -> bool:
+        return sleep_until(self.clock, t, stop)
 
 
 class CanLogPlayer:
@@ -200,11 +211,12 @@ class CanLogPlayer:
     A frame recorded at ``t`` is stamped ``t - anchor_log_s + anchor_s`` and sent when
     ``schedule`` says that stamp is due: ``anchor_log_s`` (default: the log's first
     frame) lines up with ``anchor_s`` on the receiver's clock (default: when `start` is
-    called). A bus that keeps the sender's stamps (python-can ``virtual`` with
-    ``preserve_timestamps=True``) hands them on as they are; a real bus stamps frames on
-    arrival, which is the same time when ``schedule`` is the wall clock. With ``loop``
-    the log starts over when it ends, each lap stamped one log span (plus ``lap_gap_s``)
-    later. A frame stamped before its predecessor is skipped, as the log sources do.
+    called, on ``clock``, the system's by default). A bus that keeps the sender's stamps
+    (python-can ``virtual`` with ``preserve_timestamps=True``) hands them on as they are;
+    a real bus stamps frames on arrival, which is the same time when ``schedule`` is the
+    wall clock. With ``loop`` the log starts over when it ends, each lap stamped one log
+    span (plus ``lap_gap_s``) later. A frame stamped before its predecessor is skipped,
+    as the log sources do.
 
     Nothing stops the thread but `stop`: garbled frames (the reader logs and skips
     them), frames the bus refuses and skipped frames are logged and counted in
@@ -221,6 +233,7 @@ class CanLogPlayer:
         schedule: Schedule | None = None,
         loop: bool = False,
         lap_gap_s: float = 0.01,
+        clock: Clock | None = None,
     ) -> None:
         self.path = Path(path)
         CanLogReader(self.path)  # the suffix is checked here
@@ -229,7 +242,8 @@ class CanLogPlayer:
         self.bus = bus
         self.anchor_s = anchor_s
         self.anchor_log_s = anchor_log_s
-        self.schedule: Schedule = schedule or WallClock()
+        self.clock = clock or SystemClock()
+        self.schedule: Schedule = schedule or WallClock(self.clock)
         self.loop = loop
         self.lap_gap_s = lap_gap_s
         self.sent = 0  #: frames sent
@@ -238,7 +252,7 @@ class CanLogPlayer:
         self.garbled = 0  #: garbled frames the reader skipped (all laps)
         self.failures = 0  #: unexpected failures (each ended the playing)
         self.laps = 0  #: times the log was played to its end
-        self._stop = threading.Event()
+        self._stop = self.clock.event()
         self._thread: threading.Thread | None = None
 
     @property
@@ -254,7 +268,7 @@ class CanLogPlayer:
         if self._thread is not None:
             raise OperationError(f"{self.path}: the player was started already")
         if self.anchor_s is None:
-            self.anchor_s = time.time()
+            self.anchor_s = self.clock.now()
         self._thread = threading.Thread(target=self._run, name="can-log-player", daemon=True)
         self._thread.start()
 
@@ -323,8 +337,7 @@ class CanLogPlayer:
                 assert shift is not None
                 msg.timestamp = t + shift
                 self.schedule.start(msg.timestamp)
-                wait = self.schedule.due_in(msg.timestamp)
-                if wait > 0 and self._stop.wait(wait):
+                if self.schedule.sleep_until(msg.timestamp, self._stop):
                     break
                 self._send(msg)
         finally:

@@ -46,7 +46,8 @@ def add_subparser(sub: Any) -> None:
         "--cache",
         default=None,
         metavar="DIR",
-        help="keep the rendered drive(s) in DIR and reuse them, also for 'bench batch'"
+        help="keep the rendered drive(s) in DIR and reuse them, also for 'bench batch' and"
+        " 'bench status'"
         " (default: render into a temporary folder)",
     )
     p.set_defaults(func=_run)
@@ -66,7 +67,7 @@ def _run(args: argparse.Namespace) -> int:
                 "json_path": args.json,
                 "cache": args.cache,
             }
-        elif name == "batch":
+        elif name in ("batch", "status"):
             options = {"cache": args.cache}
         print(
             run_benchmark(name, repeats=args.repeats, quick=args.quick, seed=args.seed, **options)

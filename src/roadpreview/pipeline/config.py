@@ -181,6 +181,16 @@ class DaemonConfig:
         " restart frees); 0: never (the daemon reopens the camera itself and keeps sending"
         " DEGRADED status)",
     )
+    switch_interval_s: float = param(
+        0.001,
+        unit="s",
+        gt=0.0,
+        le=0.1,
+        help="Python's thread switch interval while the daemon runs (sys.setswitchinterval;"
+        " Python's default 0.005): how long the RP_STATUS sender may wait for the"
+        " interpreter per busy thread; at 5 ms its period jitter under a burst of input on a"
+        " loaded machine was twice that at 1 ms (docs/daemon.md)",
+    )
 
 
 @dataclass(frozen=True)

@@ -7,27 +7,39 @@ that frame), until the ego has passed its spot; then ``RP_ALERT_END`` (PASSED, o
 CANCELLED, also for every alert still active at close). `AlertRepeater`
 (`roadpreview.canbus.repetition`) decides what goes out when. Per confirmation
 ``RP_CONFIRM`` at its frame (with the running precision after it), and ``RP_STATUS`` +
-``RP_ROAD_STATUS`` when the loop says the status is due. Every sink uses one
-`OutputEncoders` bundle, so a log holds exactly the frames a bus would get.
+``RP_ROAD_STATUS`` (and ``RP_INPUT_STATUS`` while the inputs have problems) when the
+loop says the status is due. Every sink uses one `OutputEncoders` bundle, so a log holds
+exactly the frames a bus would get.
+
+On a live bus the status does not wait for the loop: `CanBusSink` with a `StatusCycle`
+sends it from a `roadpreview.canbus.cyclic.CyclicSender` of its own, every period of the
+cycle's clock, built at each send from the newest status the loop handed the sink (with
+every frame, at every status period); a loop held up by a burst of input or a slow frame
+then holds up nothing but the status's content (its heartbeat stops changing, as the
+DBC says a stalled video pipeline shows).
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import threading
 from abc import ABC, abstractmethod
 from collections import Counter
-from collections.abc import Sequence
-from dataclasses import replace
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import can
 
+from roadpreview.canbus.cyclic import CyclicSender
 from roadpreview.canbus.logio import CanLogWriter
 from roadpreview.canbus.output import OutputEncoders
 from roadpreview.canbus.repetition import AlertEnd, AlertRepeater, AlertSend, RepetitionConfig
+from roadpreview.clock import Clock
 from roadpreview.sinks import Sink
+from roadpreview.supervision import Supervision
 from roadpreview.types import Alert, CameraFrame, ConfirmationResult, Status
 
 if TYPE_CHECKING:
@@ -170,6 +182,21 @@ SEND_ERRORS_LOGGED = 5
 SEND_ERROR_LOG_EVERY = 1000
 
 
+@dataclass(frozen=True)
+class StatusCycle:
+    """The periodic status (RP_STATUS, RP_ROAD_STATUS, RP_INPUT_STATUS while the inputs
+    have problems) sent by a thread of its own every ``period_s`` of ``clock`` (the
+    frames' clock: a `roadpreview.loop.Pace`, or the system's monotonic clock with
+    ``stamp`` the frames' clock for the time stamps), supervised by ``supervision``;
+    ``on_failed`` hears when the sender gave up."""
+
+    clock: Clock
+    period_s: float = 0.1
+    stamp: Callable[[], float] | None = None  #: the frames' time stamps (default: clock)
+    supervision: Supervision = field(default_factory=Supervision)
+    on_failed: Callable[[str], None] | None = None
+
+
 class CanBusSink(CanSink):
     """The output frames sent on a bus (stamped with the pipeline's time, which is the
     wall clock in the daemon; the receiver stamps them again). A send that fails, with
@@ -178,7 +205,12 @@ class CanBusSink(CanSink):
     every `SEND_ERROR_LOG_EVERY`-th, and once when a send succeeds again) and never
     raised: the next frame, e.g. the next period's RP_STATUS, is sent as usual.
     ``record`` also writes every frame sent to a CAN log. At close the active alerts end
-    (CANCELLED, STOPPED) and the last status (after the flush) is sent once more."""
+    (CANCELLED, STOPPED) and the last status (after the flush) is sent once more.
+
+    With ``cycle`` the status goes out from ``status_sender`` (a `CyclicSender`, started
+    at the first frame), every period of the cycle's clock, from the newest status the
+    loop handed the sink, stamped when it is sent; the loop's status schedule then only
+    updates that status. Sends from the loop's thread and the sender's are serialised."""
 
     def __init__(
         self,
@@ -187,6 +219,7 @@ class CanBusSink(CanSink):
         detector: str = "two-axle",
         record: str | Path | None = None,
         repetition: RepetitionConfig | None = None,
+        cycle: StatusCycle | None = None,
     ) -> None:
         super().__init__(detector=detector, repetition=repetition)
         self.bus = bus
@@ -195,6 +228,38 @@ class CanBusSink(CanSink):
         self._failing = 0  # send errors since the last frame that went out
         self.record = CanLogWriter(record) if record is not None else None
         self._last: tuple[float, Status] | None = None  # the newest time and status seen
+        self._lock = threading.Lock()  # one sender at a time: the loop's or the cycle's
+        self._started = False  # the status sender was started (once, at the first status)
+        self.cycle = cycle
+        self.status_sender: CyclicSender | None = None
+        if cycle is not None:
+            self.status_sender = CyclicSender(
+                "can-status",
+                self._status_now,
+                self._emit_one,
+                clock=cycle.clock,
+                period_s=cycle.period_s,
+                stamp=cycle.stamp,
+                supervision=cycle.supervision,
+                on_failed=cycle.on_failed,
+            )
+
+    def _status_now(self) -> list[can.Message]:
+        """The cycle's frames, from the newest status (the sender's thread)."""
+        last = self._last
+        if last is None:
+            return []
+        return self.encoders.status_frames(last[1], timestamp=last[0])
+
+    def _emit_one(self, msg: can.Message) -> bool:
+        with self._lock:
+            ok = self._emit(msg)
+            self.frames_out += ok
+            return ok
+
+    def _emit_all(self, msgs: Sequence[can.Message]) -> None:
+        with self._lock:
+            super()._emit_all(msgs)
 
     def _emit(self, msg: can.Message) -> bool:
         try:
@@ -225,15 +290,22 @@ class CanBusSink(CanSink):
         return True
 
     def _note(self, t_s: float, status: Status) -> None:
+        """The newest time and status (one reference: the sender's thread reads it whole)."""
         t_last = self._last[0] if self._last is not None else t_s
         self._last = (max(t_s, t_last), status)
+        if self.status_sender is not None and not self._started:
+            self._started = True
+            self.status_sender.start()
 
     def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
         super().on_frame(frame, result, status)
         self._note(result.t, status)
 
     def on_status(self, t_s: float, status: Status) -> None:
-        super().on_status(t_s, status)
+        if self.status_sender is None:
+            super().on_status(t_s, status)
+        else:  # the cycle sends it
+            self.t_last = max(self.t_last, t_s)
         self._note(t_s, status)
 
     def on_flush(self, t_s: float, alerts: Sequence[Alert], status: Status) -> None:
@@ -241,13 +313,27 @@ class CanBusSink(CanSink):
         self._note(t_s, status)
 
     def close(self, summary: RunSummary) -> None:
+        stopped = True
+        if self.status_sender is not None:
+            stopped = self.status_sender.stop()
         try:
             super().close(summary)
-            if self._last is not None:  # the last word: the counts after the flush
-                CanSink.on_status(self, *self._last)
+            if self._last is not None and stopped:  # the last word: counts after the flush
+                t, status = self._last
+                cycle = self.cycle
+                if cycle is not None:  # after the cycle's frames, on their clock
+                    t = (cycle.stamp or cycle.clock.now)()
+                CanSink.on_status(self, t, status)
         finally:
             if self.record is not None:
                 self.record.close()
 
 
-__all__ = ["CanBusSink", "CanLogSink", "CanMemorySink", "CanSink", "repetition_config"]
+__all__ = [
+    "CanBusSink",
+    "CanLogSink",
+    "CanMemorySink",
+    "CanSink",
+    "StatusCycle",
+    "repetition_config",
+]

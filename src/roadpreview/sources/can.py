@@ -24,6 +24,7 @@ from roadpreview.canbus.decode import CanInputDecoder
 from roadpreview.canbus.live import CanReceiver
 from roadpreview.canbus.logio import CanLogReader, read_can_log
 from roadpreview.canbus.mapping import load_mapping
+from roadpreview.clock import Clock, SystemClock
 from roadpreview.errors import InputDataError
 from roadpreview.plausibility import PlausibilityConfig
 from roadpreview.sources import shifted
@@ -137,7 +138,8 @@ class CanLogSource:
 
 class CanBusSource:
     """The samples of a live bus, decoded as frames arrive (python-can's notifier thread
-    queues them, bounded; drops are counted). Live. The bus stays its owner's."""
+    queues them, bounded; drops are counted). Live. The bus stays its owner's. Waits for
+    frames on ``clock`` (at most ``poll_s`` at a time; default: the system's)."""
 
     live = True
     #: the frames' clock check before decoding (a `ClockGuard` installs one)
@@ -150,8 +152,10 @@ class CanBusSource:
         *,
         queue_size: int = 10_000,
         poll_s: float = 0.05,
+        clock: Clock | None = None,
     ) -> None:
         self.bus = bus
+        self.clock = clock or SystemClock()
         self.name = f"CAN bus {bus.channel_info}"
         self.decoder = decoder
         self.queue_size = queue_size
@@ -159,6 +163,7 @@ class CanBusSource:
         self.frames = 0  #: frames received
         self.receiver: CanReceiver | None = None
         self._stop = threading.Event()
+        self._arrived = self.clock.event()  # a frame was queued (or `close` was called)
 
     @property
     def dropped(self) -> int:
@@ -180,7 +185,7 @@ class CanBusSource:
         return self.decoder.stats.skipped + self.dropped + self.receive_errors
 
     def __iter__(self) -> Iterator[InputSample]:
-        self.receiver = CanReceiver(self.bus, maxsize=self.queue_size)
+        self.receiver = CanReceiver(self.bus, maxsize=self.queue_size, arrived=self._arrived)
         check = self.stamp_filter
         try:
             frames = self._received(self.receiver)
@@ -191,13 +196,17 @@ class CanBusSource:
 
     def _received(self, receiver: CanReceiver) -> Iterator[can.Message]:
         while not self._stop.is_set():
-            msg = receiver.recv(timeout=self.poll_s)
-            if msg is not None:
-                self.frames += 1
-                yield msg
+            self._arrived.clear()  # before looking: a frame queued after it sets it again
+            msg = receiver.recv(timeout=0.0)
+            if msg is None:
+                self.clock.wait(self._arrived, self.poll_s)
+                continue
+            self.frames += 1
+            yield msg
 
     def close(self) -> None:
         self._stop.set()
+        self._arrived.set()  # a reader waiting for a frame looks again now
 
 
 def first_timestamp(path: str | Path) -> float:
