@@ -21,7 +21,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
 import can
@@ -393,13 +393,17 @@ class OutputEncoders:
     def status_frames(self, status: Status, *, timestamp: float = 0.0) -> list[can.Message]:
         """The periodic frames: ``RP_STATUS``, ``RP_ROAD_STATUS``, then ``RP_INPUT_STATUS``
         while the inputs have problems (and once after: `InputStatusEncoder.due`)."""
-        frames = [
-            self.status.encode(status, timestamp=timestamp),
-            self.road.encode(status, timestamp=timestamp),
-        ]
+        return list(self.iter_status_frames(status, timestamp=timestamp))
+
+    def iter_status_frames(
+        self, status: Status, *, timestamp: float = 0.0
+    ) -> Iterator[can.Message]:
+        """`status_frames` one at a time, each encoded when it is asked for (a sender that
+        sends each as it comes puts RP_STATUS out before the others are encoded)."""
+        yield self.status.encode(status, timestamp=timestamp)
+        yield self.road.encode(status, timestamp=timestamp)
         if self.input.due(status):
-            frames.append(self.input.encode(status, timestamp=timestamp))
-        return frames
+            yield self.input.encode(status, timestamp=timestamp)
 
 
 def detector_code(detector: str) -> int:
