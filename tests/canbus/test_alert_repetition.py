@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from cantools.database.can import Database
 
-from roadpreview.canbus.output import (
+from roadpreview.canbus.received import (
     OutputDecoder,
     ReceivedAlert,
     ReceivedAlertEnd,

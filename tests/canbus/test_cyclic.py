@@ -17,7 +17,7 @@ import can
 import pytest
 
 from roadpreview.canbus.cyclic import CyclicSender
-from roadpreview.canbus.output import OutputDecoder, ReceivedInputStatus, ReceivedStatus
+from roadpreview.canbus.received import OutputDecoder, ReceivedInputStatus, ReceivedStatus
 from roadpreview.clock import VirtualClock, sleep_until
 from roadpreview.loop import RunSummary, run
 from roadpreview.pipeline import FrameResult

@@ -31,7 +31,7 @@ from roadpreview.canbus import (
     read_can_log,
     replay,
 )
-from roadpreview.canbus.output import ReceivedAlertEnd
+from roadpreview.canbus.received import ReceivedAlertEnd
 from roadpreview.canbus.repetition import EndReason
 from roadpreview.errors import ConfigError
 from roadpreview.loop import RunSummary

@@ -41,7 +41,8 @@ from roadpreview.canbus import (
     write_can_log,
 )
 from roadpreview.canbus.dbc import RP_ALERT_END
-from roadpreview.canbus.output import AlertEndEncoder, ReceivedAlertEnd
+from roadpreview.canbus.output import AlertEndEncoder
+from roadpreview.canbus.received import ReceivedAlertEnd
 from roadpreview.canbus.repetition import AlertEnd, AlertSend, EndCause, EndReason
 from roadpreview.errors import ConfigError
 from roadpreview.types import (

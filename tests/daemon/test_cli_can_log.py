@@ -18,7 +18,7 @@ import roadpreview.apps.daemon as daemon_module
 from roadpreview.apps.daemon import Daemon, DaemonOptions
 from roadpreview.apps.replay import ReplayInputs, replay
 from roadpreview.canbus import read_can_log
-from roadpreview.canbus.output import OutputDecoder, ReceivedAlert
+from roadpreview.canbus.received import OutputDecoder, ReceivedAlert
 from roadpreview.cli.main import main
 from roadpreview.clock import VirtualClock
 

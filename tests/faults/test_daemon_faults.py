@@ -26,7 +26,7 @@ from tests.daemon.conftest import SETTLE_S, VIRTUAL_T0, BusRecorder, ClockDriver
 from roadpreview.apps.daemon import Daemon, DaemonOptions, DaemonSummary
 from roadpreview.canbus import read_can_log
 from roadpreview.canbus.logio import CanLogWriter
-from roadpreview.canbus.output import OutputDecoder, ReceivedStatus
+from roadpreview.canbus.received import OutputDecoder, ReceivedStatus
 from roadpreview.cli.main import main
 from roadpreview.clock import VirtualClock
 from roadpreview.loop import Supervision

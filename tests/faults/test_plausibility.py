@@ -20,7 +20,8 @@ from cantools.database.can import Database
 
 from roadpreview.canbus import CanInputDecoder, encode_protected, load_database, load_mapping
 from roadpreview.canbus.imu_csv import IMU_CSV_COLUMNS
-from roadpreview.canbus.output import InputStatusEncoder, OutputDecoder, ReceivedInputStatus
+from roadpreview.canbus.output import InputStatusEncoder
+from roadpreview.canbus.received import OutputDecoder, ReceivedInputStatus
 from roadpreview.fusion.heave import HeaveObserver
 from roadpreview.plausibility import PlausibilityConfig
 from roadpreview.sources.imu_csv import ImuCsvSource

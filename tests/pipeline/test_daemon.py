@@ -16,7 +16,7 @@ from tests.daemon.conftest import SETTLE_S, VIRTUAL_T0, BusRecorder, VirtualRun
 from roadpreview.apps.daemon import Daemon, DaemonOptions
 from roadpreview.apps.replay import ReplayInputs, replay
 from roadpreview.canbus import read_can_log
-from roadpreview.canbus.output import (
+from roadpreview.canbus.received import (
     OutputDecoder,
     ReceivedAlert,
     ReceivedAlertDetail,

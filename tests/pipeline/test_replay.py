@@ -17,7 +17,7 @@ import pytest
 
 from roadpreview.apps.replay import ReplayInputs, replay
 from roadpreview.canbus import load_database, read_can_log
-from roadpreview.canbus.output import (
+from roadpreview.canbus.received import (
     OutputDecoder,
     ReceivedAlert,
     ReceivedAlertDetail,

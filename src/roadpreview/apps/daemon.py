@@ -46,6 +46,7 @@ Logging is structured: ``event=... key=value ...``.
 
 from __future__ import annotations
 
+import gc
 import logging
 import math
 import sys
@@ -404,9 +405,14 @@ class Daemon:
             camera_lost_s=d.watchdog_camera_lost_s,
             clock=self.timer,
         )
-        # a shorter thread switch interval: the status sender waits less for the interpreter
+        # a shorter thread switch interval: the status sender waits less for the interpreter;
+        # what exists now (modules, the pipeline, the DBC: ~140,000 objects) frozen out of
+        # the garbage collector, whose full collections then walk only what the run
+        # allocates (~1 ms instead of ~100 ms with the interpreter held, RP_STATUS too)
         switch_interval = sys.getswitchinterval()
         sys.setswitchinterval(d.switch_interval_s)
+        gc.collect()
+        gc.freeze()
         try:
             if ping_s > 0:
                 pinger_thread = threading.Thread(
@@ -453,6 +459,7 @@ class Daemon:
                 self.player.stop()
             self._shutdown_buses()
             sys.setswitchinterval(switch_interval)
+            gc.unfreeze()
             self._summarise(result)
             log.info(kv("daemon_stop", **self.summary.fields()))
         if self._thread_failure:  # the status sender kept dying: stopped, then raised

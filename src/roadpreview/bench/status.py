@@ -99,7 +99,7 @@ def _play(folder: Path, log_path: Path) -> _Run:
 
     from roadpreview.apps.daemon import Daemon, DaemonOptions
     from roadpreview.canbus.live import open_bus
-    from roadpreview.canbus.output import OutputDecoder, ReceivedStatus
+    from roadpreview.canbus.received import OutputDecoder, ReceivedStatus
     from roadpreview.pipeline.config import PipelineConfig
     from roadpreview.sim.recording import Recording
 

@@ -4,12 +4,15 @@
   ``RP_ALERT_END``, ``RP_STATUS``, ``RP_ROAD_STATUS``, ``RP_CONFIRM``), AUTOSAR E2E P01.
 * `mapping` + `decode`: any car's DBC + a mapping file -> `ImuSample` / `SpeedSample`.
 * `imu_csv`: phone-style IMU CSV files; `samples.ImuMount`: a calibrated IMU mount.
-* `output`: `Alert` / `ConfirmationResult` / `Status` -> E2E-protected frames, and back.
+* `output`: `Alert` / `ConfirmationResult` / `Status` -> E2E-protected frames;
+  `received`: those frames back, as a receiver sees them (`OutputDecoder`).
 * `repetition`: each alert repeated with its distance and time to arrival as of the send
   until the ego has passed the spot, then ``RP_ALERT_END`` (passed / cancelled).
 * `logio`: CAN log files in every format python-can reads (BLF, ASC, candump, TRC, CSV,
   MF4, SQLite, .gz).
 * `live`: python-can buses, a bounded-queue listener, a log played onto a bus.
+* `cyclic`: frames built and sent every period by a supervised thread of their own on a
+  clock (RP_STATUS on a live bus).
 
 The names below are imported lazily (PEP 562): ``import roadpreview.canbus`` loads no
 python-can bus, DBC or E2E code until one of them is used.
@@ -154,34 +157,7 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
         ConfirmEncoder as ConfirmEncoder,
     )
     from roadpreview.canbus.output import (
-        OutputDecoder as OutputDecoder,
-    )
-    from roadpreview.canbus.output import (
         OutputEncoders as OutputEncoders,
-    )
-    from roadpreview.canbus.output import (
-        ReceivedAlert as ReceivedAlert,
-    )
-    from roadpreview.canbus.output import (
-        ReceivedAlertDetail as ReceivedAlertDetail,
-    )
-    from roadpreview.canbus.output import (
-        ReceivedAlertEnd as ReceivedAlertEnd,
-    )
-    from roadpreview.canbus.output import (
-        ReceivedConfirm as ReceivedConfirm,
-    )
-    from roadpreview.canbus.output import (
-        ReceivedInputStatus as ReceivedInputStatus,
-    )
-    from roadpreview.canbus.output import (
-        ReceivedOutput as ReceivedOutput,
-    )
-    from roadpreview.canbus.output import (
-        ReceivedRoadStatus as ReceivedRoadStatus,
-    )
-    from roadpreview.canbus.output import (
-        ReceivedStatus as ReceivedStatus,
     )
     from roadpreview.canbus.output import (
         RoadStatusEncoder as RoadStatusEncoder,
@@ -195,6 +171,15 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
     from roadpreview.canbus.output import (
         detector_code as detector_code,
     )
+    from roadpreview.canbus.received import OutputDecoder as OutputDecoder
+    from roadpreview.canbus.received import ReceivedAlert as ReceivedAlert
+    from roadpreview.canbus.received import ReceivedAlertDetail as ReceivedAlertDetail
+    from roadpreview.canbus.received import ReceivedAlertEnd as ReceivedAlertEnd
+    from roadpreview.canbus.received import ReceivedConfirm as ReceivedConfirm
+    from roadpreview.canbus.received import ReceivedInputStatus as ReceivedInputStatus
+    from roadpreview.canbus.received import ReceivedOutput as ReceivedOutput
+    from roadpreview.canbus.received import ReceivedRoadStatus as ReceivedRoadStatus
+    from roadpreview.canbus.received import ReceivedStatus as ReceivedStatus
     from roadpreview.canbus.repetition import (
         AlertEnd as AlertEnd,
     )
@@ -243,7 +228,7 @@ _EXPORTS = {
     "ImuMount": "roadpreview.canbus.samples",
     "InputMapping": "roadpreview.canbus.mapping",
     "LogProblem": "roadpreview.canbus.logio",
-    "OutputDecoder": "roadpreview.canbus.output",
+    "OutputDecoder": "roadpreview.canbus.received",
     "OutputEncoders": "roadpreview.canbus.output",
     "QUANTITIES": "roadpreview.canbus.mapping",
     "RESERVED_OUTPUT_IDS": "roadpreview.canbus.dbc",
@@ -254,14 +239,14 @@ _EXPORTS = {
     "RP_INPUT_STATUS": "roadpreview.canbus.dbc",
     "RP_ROAD_STATUS": "roadpreview.canbus.dbc",
     "RP_STATUS": "roadpreview.canbus.dbc",
-    "ReceivedAlert": "roadpreview.canbus.output",
-    "ReceivedAlertDetail": "roadpreview.canbus.output",
-    "ReceivedAlertEnd": "roadpreview.canbus.output",
-    "ReceivedConfirm": "roadpreview.canbus.output",
-    "ReceivedOutput": "roadpreview.canbus.output",
-    "ReceivedInputStatus": "roadpreview.canbus.output",
-    "ReceivedRoadStatus": "roadpreview.canbus.output",
-    "ReceivedStatus": "roadpreview.canbus.output",
+    "ReceivedAlert": "roadpreview.canbus.received",
+    "ReceivedAlertDetail": "roadpreview.canbus.received",
+    "ReceivedAlertEnd": "roadpreview.canbus.received",
+    "ReceivedConfirm": "roadpreview.canbus.received",
+    "ReceivedOutput": "roadpreview.canbus.received",
+    "ReceivedInputStatus": "roadpreview.canbus.received",
+    "ReceivedRoadStatus": "roadpreview.canbus.received",
+    "ReceivedStatus": "roadpreview.canbus.received",
     "RepetitionConfig": "roadpreview.canbus.repetition",
     "RoadStatusEncoder": "roadpreview.canbus.output",
     "StatusEncoder": "roadpreview.canbus.output",

@@ -8,8 +8,9 @@ content is the run loop's newest state, ``RP_INPUT_STATUS`` goes out only while 
 inputs have problems (IfActive), and tests run on virtual time. So `CyclicSender` keeps
 python-can's schedule, a fixed rate (the next send is due one period after the one
 scheduled, not after the one done; `roadpreview.clock.Cycle`), and asks a ``build``
-callback for the frames of each cycle at the moment they go out. Each frame is stamped
-with ``stamp()`` just before it is handed to ``send``.
+callback for the frames of each cycle at the moment they go out (an iterable: each frame
+is sent as soon as it is built). Each frame is stamped with ``stamp()`` just before it is
+handed to ``send``.
 
 Supervised (`roadpreview.supervision.SupervisedThread`): a send that fails is logged and
 counted by ``send`` (it returns False) and the cycle goes on; an exception out of a cycle
@@ -23,7 +24,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable
 
 import can
 
@@ -42,7 +43,7 @@ class CyclicSender:
     def __init__(
         self,
         name: str,
-        build: Callable[[], Sequence[can.Message]],
+        build: Callable[[], Iterable[can.Message]],
         send: Callable[[can.Message], bool],
         *,
         clock: Clock,

@@ -26,7 +26,7 @@ import math
 import threading
 from abc import ABC, abstractmethod
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -244,12 +244,12 @@ class CanBusSink(CanSink):
                 on_failed=cycle.on_failed,
             )
 
-    def _status_now(self) -> list[can.Message]:
-        """The cycle's frames, from the newest status (the sender's thread)."""
+    def _status_now(self) -> Iterator[can.Message]:
+        """The cycle's frames, from the newest status, each encoded as it is sent (the
+        sender's thread)."""
         last = self._last
-        if last is None:
-            return []
-        return self.encoders.status_frames(last[1], timestamp=last[0])
+        if last is not None:
+            yield from self.encoders.iter_status_frames(last[1], timestamp=last[0])
 
     def _emit_one(self, msg: can.Message) -> bool:
         with self._lock:
