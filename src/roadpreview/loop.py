@@ -30,6 +30,11 @@ are thin compositions of it (`roadpreview.apps`, `roadpreview.eval.runner`).
 A sink that raises is logged and counted in ``summary.sink_errors``; it does not stop
 the run.
 
+**Memory.** Every `HEAP_TRIM_PERIOD_S` of the frames' clock the loop hands the C heap's
+free memory back to the system (`release_free_heap`, glibc's ``malloc_trim``): the
+frames' image buffers are freed every frame, and glibc keeps what they leave behind, so
+that a long run's resident set crept up with no object growing (docs/robustness.md).
+
 **Clocks.** A live run waits on a `roadpreview.clock.Clock` (``clock``; a `Pace` is one
 too): the paced sources until a sample is due, the merge for arrivals (at most
 ``poll_s``), the supervisor's backoffs. Tests pass a `roadpreview.clock.VirtualClock`
@@ -51,6 +56,9 @@ counter a source, its inner source or its decoder exposes) are collected into
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import functools
 import heapq
 import logging
 import math
@@ -82,6 +90,37 @@ from roadpreview.types import (
 )
 
 log = logging.getLogger(__name__)
+
+#: how often the loop releases the C heap's free memory (`release_free_heap`), frames' s
+HEAP_TRIM_PERIOD_S = 10.0
+
+
+@functools.cache
+def _malloc_trim() -> Callable[[int], int] | None:
+    """glibc's ``malloc_trim``, or None where the C library has none (musl, macOS)."""
+    try:
+        trim = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return None
+    trim.argtypes = [ctypes.c_size_t]
+    trim.restype = ctypes.c_int
+    return trim
+
+
+def release_free_heap() -> bool:
+    """Hand the free memory of every C heap arena back to the system (glibc's
+    ``malloc_trim(0)``: a millisecond or two); False where there is nothing to call.
+
+    glibc raises its mmap threshold to the size of each large block freed, so that a
+    frame's image buffers, freed at every frame, come from the heap after the first one;
+    what they free there stays mapped between the long-lived blocks around it, and the
+    resident set ratchets up over hours while no Python object grows."""
+    trim = _malloc_trim()
+    if trim is None:
+        return False
+    trim(0)
+    return True
+
 
 class Stage(Protocol):
     """What the loop drives: `roadpreview.pipeline.Pipeline`, or the evaluation's fan-out
@@ -527,6 +566,7 @@ class _LoopState:
         self.summary = summary
         self.sources = sources
         self.cycle = Cycle(status_period_s)  #: the status schedule, on the frames' clock
+        self.trim = Cycle(HEAP_TRIM_PERIOD_S)  #: the heap's release (`release_free_heap`)
         self.last_t = -math.inf
         self.new_frame = False
         self.last_gyro_t = -math.inf  #: the newest gyro sample's time (mode reasons)
@@ -608,6 +648,9 @@ class _LoopState:
             self.cycle.sent(r.t)
         if not injected:
             summary.frame_ms.add((time.perf_counter() - c0) * 1e3)
+        if self.trim.due(r.t):
+            release_free_heap()
+            self.trim.sent(r.t)
 
     def tick(self, t: float) -> None:
         """No sample is due up to ``t``: the status, if its period has passed since the last
@@ -670,6 +713,7 @@ __all__ = [
     "Supervision",
     "Watchdog",
     "install_signal_handlers",
+    "release_free_heap",
     "run",
     "source_problems",
 ]

@@ -23,8 +23,10 @@ Measured while the replay runs, in preallocated arrays (the probe does not grow)
   so that a buffer that grows is named.
 
 Reported: RSS at 10/50/90/100 % and whether it stays within 10 % (max - min over the RSS
-at 10 %), the per-frame costs as medians over the first and the last minute of drive
-time (and the minute before each checkpoint), and the containers that grew after 50 %.
+at 10 %), its slope after the warm-up (a least-squares line through the samples from the
+10 % checkpoint on, MB per minute of drive), the per-frame costs as medians over the first
+and the last minute of drive time (and the minute before each checkpoint), and the
+containers that grew after 50 %.
 """
 
 from __future__ import annotations
@@ -363,6 +365,8 @@ class SoakReport:
     rss_spread: float  #: (max - min) / RSS at 10 %
     grown: dict[str, list[int]]
     window_s: float = WINDOW_S  #: the costs' window of drive time
+    #: MB per minute of drive: least squares over the RSS samples from the 10 % checkpoint
+    rss_slope_mb_min: float = math.nan
     rss_series: list[tuple[float, float]] = field(default_factory=list)  #: (drive s, MB)
     #: per window of drive time (``window_s``, from the first frame): its end (s) and the
     #: median of each cost (ms): the trend between the checkpoints
@@ -429,6 +433,17 @@ def summarise(
     spread = (max(rss) - min(rss)) / rss[0] if rss else math.nan
     grown = grown_containers([probe.snapshots[q]["containers"] for q in sorted(probe.snapshots)])
     return rows, costs, bool(spread <= FLAT_WITHIN), spread, grown
+
+
+def rss_slope(probe: SoakProbe, rows: list[dict[str, float]]) -> float:
+    """MB per minute of drive of the RSS samples from the first checkpoint (the warm-up's
+    end) on, least squares; NaN with fewer than 3."""
+    t, mb = probe.rss_t[: probe.n_rss], probe.rss[: probe.n_rss]
+    rel = t - t[0] if t.size else t
+    keep = rel >= (rows[0]["drive_s"] if rows else 0.0)
+    if np.count_nonzero(keep) < 3:
+        return math.nan
+    return float(np.polyfit(rel[keep] / 60.0, mb[keep], 1)[0])
 
 
 # -- the drive -----------------------------------------------------------------------------
@@ -630,6 +645,7 @@ def soak(
         costs=costs,
         rss_flat=flat,
         rss_spread=spread,
+        rss_slope_mb_min=rss_slope(probe, rows),
         grown=grown,
         rss_series=[
             (float(a - t0), float(b))
@@ -682,7 +698,8 @@ def format_report(report: SoakReport) -> str:
         )
     lines.append(
         f"RSS flat within {100 * FLAT_WITHIN:.0f} %: {'yes' if report.rss_flat else 'NO'} "
-        f"(spread {100 * report.rss_spread:.1f} % of the RSS at 10 %)"
+        f"(spread {100 * report.rss_spread:.1f} % of the RSS at 10 %); slope from 10 % on "
+        f"{report.rss_slope_mb_min:+.3f} MB/min"
     )
     for name, label in (
         ("fusion_cpu_ms", "fusion"),
