@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import logging
 import random
+import threading
 import uuid
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -301,6 +302,11 @@ def test_a_source_that_keeps_failing_exits_the_daemon_non_zero(
             self.started_at: list[float] = []  # the daemon's clock at each start
 
         def __iter__(self) -> Iterator[Any]:
+            # the source's thread takes part in the virtual time from here: a thread that
+            # waited once holds the clock until it waits again (its backoff), so that the
+            # clock driver cannot move time on while a loaded machine runs the death's
+            # handling (a thread new to the clock is not known to it)
+            clock.wait(threading.Event(), 0.0)
             self.started_at.append(clock.now())
             raise OSError(19, "No such device")
 
