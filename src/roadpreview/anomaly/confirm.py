@@ -153,7 +153,7 @@ class EgoConfirmer:
     def _background(self) -> float:
         if not self._bg or self._bg[-1][0] - self._bg[0][0] < self.config.min_background_s:
             return math.nan
-        return float(np.median([p for _, p in self._bg]))
+        return float(np.median(np.fromiter((p for _, p in self._bg), float, len(self._bg))))
 
     def push(
         self, t: float, speed_mps: float | None, accel_peak_mps2: float
@@ -174,7 +174,9 @@ class EgoConfirmer:
         in_window = False
         out: list[ConfirmationResult] = []
         keep: list[_Pending] = []
-        bg = self._background()
+        # the background is read only to resolve a pending alert (a median over its window:
+        # not worth a frame without one)
+        bg = self._background() if self._pending else math.nan
         for p in self._pending:
             if t <= p.t_s:
                 keep.append(p)
