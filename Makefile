@@ -14,6 +14,8 @@ LOCK_ARGS := pyproject.toml --extra dev --extra eval --group build --universal -
 # pytest-xdist: one worker per core (override with `make test PYTEST_WORKERS=1`); a module
 # goes to one worker whole (--dist loadscope), so its module fixtures are built once
 PYTEST_WORKERS ?= auto
+# mypy's parallel checking (mypy >= 2.0): a cold cache, as on a clean clone, in 25 s instead of 40
+MYPY_WORKERS ?= 2
 
 .PHONY: demo test lint bench lock test-latest clean
 
@@ -29,7 +31,7 @@ demo: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests bench
-	$(BIN)/mypy
+	$(BIN)/mypy --num-workers $(MYPY_WORKERS)
 
 test: lint
 	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) --dist loadscope --durations=15
@@ -50,7 +52,7 @@ test-latest: $(STAMP)
 	$(BIN)/uv pip list --python $(LATEST)/bin/python --format freeze > $(LATEST)/versions.txt
 	@echo "test-latest: $$(wc -l < $(LATEST)/versions.txt) packages, listed in $(LATEST)/versions.txt"
 	$(LATEST)/bin/ruff check src tests bench
-	$(LATEST)/bin/mypy
+	$(LATEST)/bin/mypy --num-workers $(MYPY_WORKERS)
 	$(LATEST)/bin/python -m pytest -n $(PYTEST_WORKERS) --dist loadscope
 
 clean:

@@ -92,6 +92,8 @@ class EvalPlan:
     #: the methods whose operating points (E6) sweep every detector's threshold grid, each
     #: threshold a run of the detector over every wild trace; None: every method
     operating_point_methods: tuple[str, ...] | None = None
+    #: E6 sweeps every this many thresholds of each detector's grid (from its lowest)
+    threshold_stride: int = 1
     # -- E3 --
     e3_step_s: float = 0.5  #: background windows every this many seconds
     e3_bins: int = 6
@@ -127,6 +129,7 @@ class EvalPlan:
             e3_bins=3,
             # the product and the paper's baseline (the sweep was 80 % of the quick run)
             operating_point_methods=("fused-kalman", "uncompensated"),
+            threshold_stride=2,  # half the sweep: its detector runs were 25 % of the rest
         )
 
     def validate(self) -> None:
@@ -135,6 +138,8 @@ class EvalPlan:
                 f"plan {self.name}: {self.wild_drives} wild drives < cv_k = {self.cv_k} "
                 "(folds never split a recording)"
             )
+        if self.threshold_stride < 1:
+            raise ConfigError(f"plan {self.name}: threshold_stride {self.threshold_stride} < 1")
         if self.e2_gap_m not in self.e1_gaps_m:
             raise ConfigError(f"plan {self.name}: e2_gap_m {self.e2_gap_m} not in e1_gaps_m")
         unknown = [n for n in self.generalization_drives if n not in GENERALIZATION_DRIVES]

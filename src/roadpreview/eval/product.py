@@ -181,16 +181,18 @@ def _folds(keys: Sequence[str], k: int, seed: int) -> list[list[str]]:
 
 def operating_points(data: EvalData, dataset: str = "wild") -> dict[str, Any]:
     """Recall (anomalies with f|δ|/d >= `RECALL_MIN_SIGNAL_PX`) and false alarms per
-    minute of the held-out folds at the lowest threshold of `THRESHOLD_GRIDS` that keeps
+    minute of the held-out folds at the lowest threshold of `THRESHOLD_GRIDS` (every
+    ``plan.threshold_stride``-th) that keeps
     the training folds at or below each rate of `FA_PER_MIN`, per method (the plan's
     ``operating_point_methods``) and detector; and the whole set's curve over the grid."""
     by_key = {j.key: j for j in data.jobs[dataset]}
     folds = _folds(sorted(by_key), data.plan.cv_k, data.plan.cv_seed)
     chosen_methods = data.plan.operating_point_methods
     methods = [m for m in data.method_names if chosen_methods is None or m in chosen_methods]
+    grids = {d: THRESHOLD_GRIDS[d][:: data.plan.threshold_stride] for d in data.detectors}
     out: dict[str, Any] = {}
     for det in data.detectors:
-        grid = THRESHOLD_GRIDS[det]
+        grid = grids[det]
         res: dict[str, Any] = {}
         for m in methods:
             tallies = {
@@ -231,7 +233,7 @@ def operating_points(data: EvalData, dataset: str = "wild") -> dict[str, Any]:
     return {
         "fa_per_min": list(FA_PER_MIN),
         "min_signal_px": RECALL_MIN_SIGNAL_PX,
-        "grids": {d: list(THRESHOLD_GRIDS[d]) for d in data.detectors},
+        "grids": {d: list(g) for d, g in grids.items()},
         "detectors": out,
     }
 
