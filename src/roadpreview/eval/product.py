@@ -182,9 +182,9 @@ def _folds(keys: Sequence[str], k: int, seed: int) -> list[list[str]]:
 def operating_points(data: EvalData, dataset: str = "wild") -> dict[str, Any]:
     """Recall (anomalies with f|δ|/d >= `RECALL_MIN_SIGNAL_PX`) and false alarms per
     minute of the held-out folds at the lowest threshold of `THRESHOLD_GRIDS` (every
-    ``plan.threshold_stride``-th) that keeps
-    the training folds at or below each rate of `FA_PER_MIN`, per method (the plan's
-    ``operating_point_methods``) and detector; and the whole set's curve over the grid."""
+    ``plan.threshold_stride``-th) that keeps the training folds at or below each rate of
+    `FA_PER_MIN`, per method (the plan's ``operating_point_methods``) and detector; and
+    the whole set's curve over the grid."""
     by_key = {j.key: j for j in data.jobs[dataset]}
     folds = _folds(sorted(by_key), data.plan.cv_k, data.plan.cv_seed)
     chosen_methods = data.plan.operating_point_methods
