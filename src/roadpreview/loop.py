@@ -10,7 +10,10 @@ are thin compositions of it (`roadpreview.apps`, `roadpreview.eval.runner`).
    its stamp by ``latency_s`` (CAN frames stamped just before a frame may still be on
    their way), so a live run sees the samples in the order a replay does. When the
    pipeline falls behind, only the newest releasable camera frame is processed; the
-   others are dropped and counted (a camera does not queue).
+   others are dropped and counted (a camera does not queue). A camera frame is merged
+   ``frame_hold_s`` after its stamp (`roadpreview.sources.merge_key`; the configuration's
+   ``[fusion] frame_hold_s``): the IMU samples for its instant are in the pipeline
+   before it, so it is fused and compensated on the gyro, not on a bridged guess.
 2. **Push** each sample into the pipeline. A camera frame not after the previous one is
    skipped and counted. After each frame the loop hands the `FrameResult` and the
    status to every sink, tracks the mode changes, and every ``status_period_s`` (on the
@@ -66,8 +69,8 @@ import queue
 import signal
 import threading
 import time
-from collections import Counter
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections import Counter, deque
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import FrameType
 from typing import Any, Protocol
@@ -312,11 +315,13 @@ class _LiveMerge:
         queue_size: int,
         supervisor: _Supervisor,
         clock: Clock,
+        frame_hold_s: Callable[[], float] = lambda: 0.0,
     ) -> None:
         self.sources = sources
         self.supervisor = supervisor
         self.pace = pace
         self.latency_s = latency_s
+        self.frame_hold_s = frame_hold_s
         self.stop = stop
         #: the clock of the samples without a pace; the merge's waits run on the pace's
         self.base_clock = clock if pace is None else pace.clock
@@ -379,6 +384,7 @@ class _LiveMerge:
         heap: list[tuple[tuple[float, int], int, Sample]] = []
         seq = 0
         files_open = sum(not s.live for s in self.sources)
+        hold_of = self.frame_hold_s
         ends_by_itself = files_open > 0 and not keep_running
         while not self.stop.is_set():
             if self.supervisor.failed:
@@ -394,13 +400,13 @@ class _LiveMerge:
                 else:
                     if self.pace is not None:
                         self.pace.start(item.t_s)  # a live source's first sample anchors it
-                    heapq.heappush(heap, (merge_key(item), seq, item))
+                    heapq.heappush(heap, (merge_key(item, hold_of()), seq, item))
                     seq += 1
                 item = self._next()
             ended = ends_by_itself and files_open == 0
             horizon = math.inf if ended else self.clock() - self.latency_s
             ready: list[Sample] = []
-            while heap and heap[0][2].t_s <= horizon:
+            while heap and heap[0][0][0] <= horizon:  # (a frame's key: its stamp + hold)
                 ready.append(heapq.heappop(heap)[2])
             frames = [i for i, s in enumerate(ready) if isinstance(s, CameraFrame)]
             skip = set(frames[:-1]) if not ended else set()  # behind: only the newest frame
@@ -429,6 +435,39 @@ class _LiveMerge:
                 log.error("event=source_thread_hangs thread=%s", th.name)
 
 
+def hold_frames(
+    samples: Iterable[Sample], hold_s: Callable[[], float]
+) -> Generator[Sample, None, None]:
+    """``samples`` (in time order) with each camera frame moved after the samples stamped up
+    to ``hold_s()`` (asked when the frame comes) after it: `merge_key` with a hold that may
+    change from frame to frame. Frames keep their order and stamps; a frame with no hold
+    and none held goes straight through; at the end, and when the input fails, the frames
+    still held come out first."""
+    held: deque[tuple[float, Sample]] = deque()
+    try:
+        for s in samples:
+            t = s.t_s
+            while held and held[0][0] < t:
+                yield held.popleft()[1]
+            if isinstance(s, CameraFrame):
+                hold = hold_s()
+                if hold <= 0.0 and not held:
+                    yield s
+                    continue
+                due = t + hold
+                if held and due < held[-1][0]:
+                    due = held[-1][0]  # (a shorter hold does not overtake a held frame)
+                held.append((due, s))
+            else:
+                yield s
+    except Exception:  # (not GeneratorExit: a closed generator yields nothing more)
+        while held:  # what came before the failure is processed, then the failure
+            yield held.popleft()[1]
+        raise
+    while held:
+        yield held.popleft()[1]
+
+
 def run(
     sources: Sequence[Source],
     pipeline: Stage,
@@ -439,6 +478,7 @@ def run(
     stop: threading.Event | None = None,
     status_period_s: float = 0.1,
     latency_s: float = 0.0,
+    frame_hold_s: float | Callable[[], float] = 0.0,
     queue_size: int = 100_000,
     poll_s: float = 0.05,
     max_frames: int | None = None,
@@ -452,6 +492,7 @@ def run(
     the supervisor's backoffs then on the monotonic clock). Raises `SourceFailed` (after
     closing the sinks) when a source keeps failing."""
     stop = stop or threading.Event()
+    hold_of = frame_hold_s if callable(frame_hold_s) else functools.partial(float, frame_hold_s)
     summary = RunSummary()
     timer = clock or SystemClock(time.monotonic)
     supervisor = _Supervisor(supervision or Supervision(), stop, timer)
@@ -466,6 +507,7 @@ def run(
                 sources,
                 pace=pace,
                 latency_s=latency_s,
+                frame_hold_s=hold_of,
                 stop=stop,
                 queue_size=queue_size,
                 supervisor=supervisor,
@@ -475,7 +517,8 @@ def run(
             stream = merge.samples(watchdogs, poll_s=poll_s, keep_running=keep_running)
         else:
             supervised = [supervisor.samples(s) for s in sources]
-            stream = ((sample, False) for sample in merge_sources(supervised))
+            merged = hold_frames(merge_sources(supervised), hold_of)
+            stream = ((sample, False) for sample in merged)
         cut = False  # stopped by max_frames
         for sample, injected in stream:
             if stop.is_set():

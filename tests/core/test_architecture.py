@@ -23,7 +23,7 @@ SRC = Path(roadpreview.__file__).parent
 #: longest source file: past it a module holds more than one thing (STYLE.md, "Files")
 MAX_LINES = 800
 #: the packages that estimate: they take typed samples and arrays, never files or buses
-CORE = ("vision", "pitch", "fusion", "anomaly")
+CORE = ("vision", "pitch", "fusion", "compensation", "anomaly")
 FORBIDDEN = (
     "can",
     "roadpreview.sim",

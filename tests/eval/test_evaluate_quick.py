@@ -65,7 +65,7 @@ def test_report_has_table1_and_figures(quick: dict[str, Any]) -> None:
     assert "QUICK CONFIGURATION" in text
     assert "## E4: the paper's Table I" in text
     labels = {m["label"] for m in quick["results"]["methods"].values()}
-    assert len(labels) == 6
+    assert len(labels) == 7  # the paper's four, the gyro with the fusion's estimates, ours two
     table_lines = [line for line in text.splitlines() if line.startswith("| ")]
     for label in labels:
         assert any(line.startswith(f"| {label} |") for line in table_lines), label
@@ -116,6 +116,27 @@ def test_report_has_every_detector_and_the_product(quick: dict[str, Any]) -> Non
         fig = res["e6"]["reliability_figure"]
         assert (quick["report"].parent / "eval" / fig).is_file()
         assert f"](eval/{fig})" in text
+
+
+def test_report_has_the_error_budget(quick: dict[str, Any]) -> None:
+    """E7: the product's budget on the wild set, each variant a row; with every term true
+    the residual is 0 (the truth wherever the product had a lead); every method's pitch
+    error; E2's ego-only crossings."""
+    text = quick["report"].read_text()
+    res = quick["results"]["results"]
+    e7 = res["e7"]
+    rows = e7["budgets"]["wild"]["fused-kalman"]["rows"]
+    assert set(rows) == {"product", "pitch only", "+ pitch + heave + distance + tracking"}
+    full = rows["+ pitch + heave + distance + tracking"]
+    assert full["r_std_px"][1] == pytest.approx(0.0, abs=1e-6)
+    assert rows["product"]["r_std_px"][0] > 0.0
+    assert 0.0 <= rows["product"]["auc"]["two-axle"]["entire"] <= 1.0
+    assert "fused-kalman" in e7["pitch"]["wild"]
+    assert "## E7: the compensation's error budget" in text
+    assert "### wild: ours fused (Kalman)" in text
+    eo = res["e2"]["ego_only"]
+    assert eo is not None
+    assert "### The ego's own anomalies, every ego-only crossing" in text
 
 
 def test_report_renders_without_the_new_blocks(quick: dict[str, Any]) -> None:

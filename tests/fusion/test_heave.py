@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
+from roadpreview.compensation import HeaveTerm, compensation, heave_term_px
 from roadpreview.errors import ConfigError
-from roadpreview.fusion.compensation import compensation, heave_term_px
-from roadpreview.fusion.heave import HeaveConfig, HeaveEstimate, HeaveObserver, HeaveTerm
+from roadpreview.fusion.heave import HeaveConfig, HeaveEstimate, HeaveObserver
 from roadpreview.types import ImuSample
 
 G = 9.80665

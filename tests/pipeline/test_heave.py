@@ -90,6 +90,26 @@ def test_a_rising_camera_is_taken_out_of_the_lead_trajectory(
     assert s(y_c) < 0.9 * s(y_c + hpx)  # with vs without the heave term
 
 
+def test_the_egos_own_bump_is_invisible_in_y_c(
+    demo10: Recording, results: list[FrameResult]
+) -> None:
+    """E2's measure on a short simulated crossing: while the ego crosses the demo's first bump
+    (its front axle at 7.78 s; the lead's at 6.06 s, 1.7 s before: the lead is still
+    settling), the detector's 1 s std of the product's y_c (detrended, `windowed_std`)
+    stays at or below 1.0 px, the issue's 90th-percentile target, and within 0.3 px of the
+    true trajectory's, which is what the lead's own settling leaves (measured 0.87 against
+    0.62 px; 0.78 with frames held for their gyro, ``[fusion] frame_hold_s``)."""
+    from roadpreview.eval.experiments.ceiling import true_compensated_y, windowed_std
+
+    t = _column(results, "t") - _column(results, "t")[0]
+    s = windowed_std(t, _column(results, "y_c"))
+    sel = (t >= EGO_CROSSING[0]) & (t <= EGO_CROSSING[0] + 1.5)
+    tt, yc_true, _ = true_compensated_y(demo10.truth, demo10.camera.fy)
+    s_true = windowed_std(tt, yc_true)
+    floor = float(np.nanmax(s_true[(tt >= EGO_CROSSING[0]) & (tt <= EGO_CROSSING[0] + 1.5)]))
+    assert float(np.nanmax(s[sel])) <= min(1.0, floor + 0.3)
+
+
 def test_the_heave_follows_the_camera_height(demo10: Recording, results: list[FrameResult]) -> None:
     """heave_m against the simulator's camera height (high-passed at the observer's 0.2 Hz,
     zero phase): correlated above 0.9 over the crossing, the error's 1 s spread below 40 %

@@ -440,6 +440,7 @@ class Daemon:
                 watchdogs=[self.camera_watchdog, self.imu_watchdog],
                 stop=self.stop_event,
                 status_period_s=cfg.can.status_period_s,
+                frame_hold_s=self.pipeline.frame_hold_s,
                 latency_s=d.can_latency_s,
                 keep_running=not (self.options.stop_at_end and not self.camera.live),
                 supervision=self.options.supervision,

@@ -344,6 +344,7 @@ def replay(
             pace=pace,
             stop=stop,
             status_period_s=config.can.status_period_s,
+            frame_hold_s=pipeline.frame_hold_s,
             max_frames=max_frames,
             progress=progress,
         )

@@ -615,8 +615,9 @@ def soak(
             detector=config.anomaly.detector,
             repetition=repetition_config(config),
         )
+        pipeline = Pipeline(inputs.camera, config)
         probe = SoakProbe(
-            Pipeline(inputs.camera, config),
+            pipeline,
             n_frames,
             rss_every_frames=round(options.rss_every_s * fps),
             watch=(sink,),
@@ -624,7 +625,13 @@ def soak(
         error = ""
         wall0 = time.perf_counter()
         try:
-            run([drive], probe, [sink], status_period_s=config.can.status_period_s)
+            run(
+                [drive],
+                probe,
+                [sink],
+                status_period_s=config.can.status_period_s,
+                frame_hold_s=pipeline.frame_hold_s,
+            )
         except Exception as exc:  # what ended the drive is the soak's finding: reported
             error = f"{type(exc).__name__}: {exc}"
             log.error("soak: the run ended at frame %d: %s", probe.n, error)

@@ -21,7 +21,8 @@ def add_subparser(sub: Any) -> None:
             "Simulate the evaluation's data sets (cached), run every method over the same "
             "recordings (one shared vision pass), run the experiments (E1 signal vs distance, "
             "E2 ego bump, E3 FPR vs rotation, E4 Table I + ROC, E5 texture loss / range / lead "
-            "time) and write results.json, the figures and optionally the Markdown report."
+            "time, E6 the product's operating points, E7 the compensation's error budget) and "
+            "write results.json, the figures and optionally the Markdown report."
         ),
     )
     p.add_argument(
@@ -52,7 +53,7 @@ def add_subparser(sub: Any) -> None:
     p.add_argument(
         "--experiments",
         default="all",
-        help="comma-separated subset of e1,e2,e3,e4,e5, or all",
+        help="comma-separated subset of e1,e2,e3,e4,e5,e6,e7, or all",
     )
     p.add_argument("--seed", type=int, default=0, help="base seed of the data sets")
     p.add_argument("--config", type=Path, help="pipeline configuration (TOML) for every method")

@@ -15,7 +15,7 @@ time are dropped and counted in ``problems``.
 from __future__ import annotations
 
 import math
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass
 
 from roadpreview.configtools import check_ranges, param
@@ -59,9 +59,8 @@ class EgoVerticalMonitor:
         self.problems: Counter[str] = Counter()
         self._t = -math.inf
         self._mean = math.nan
-        self._sum_sq = 0.0
-        self._peak = 0.0
-        self._n = 0
+        #: (stamp, band-passed acceleration) of the samples not taken yet
+        self._pending: deque[tuple[float, float]] = deque()
 
     def push(self, t: float, accel_z_mps2: float) -> None:
         """One sample of the z specific force (body up, gravity included) at ``t``."""
@@ -80,15 +79,20 @@ class EgoVerticalMonitor:
             self._mean = accel_z_mps2
             return
         self._mean += (1.0 - math.exp(-dt / c.highpass_tau_s)) * (accel_z_mps2 - self._mean)
-        a = accel_z_mps2 - self._mean
-        self._sum_sq += a * a
-        self._peak = max(self._peak, abs(a))
-        self._n += 1
+        self._pending.append((t, accel_z_mps2 - self._mean))
 
-    def take(self) -> EgoVertical:
-        """The summary of the samples since the previous take (NaN without any)."""
-        if self._n == 0:
+    def take(self, until: float = math.inf) -> EgoVertical:
+        """The summary of the samples stamped up to ``until`` since the previous take (NaN
+        without any); later ones stay for the next take. (The run loop holds a frame until
+        the IMU has caught up with it: the frame at t takes the samples stamped up to t, as
+        without the hold.)"""
+        pending = self._pending
+        sum_sq, peak, n = 0.0, 0.0, 0
+        while pending and pending[0][0] <= until:
+            a = pending.popleft()[1]
+            sum_sq += a * a
+            peak = max(peak, abs(a))
+            n += 1
+        if n == 0:
             return EgoVertical()
-        out = EgoVertical(math.sqrt(self._sum_sq / self._n), self._peak, self._n)
-        self._sum_sq, self._peak, self._n = 0.0, 0.0, 0
-        return out
+        return EgoVertical(math.sqrt(sum_sq / n), peak, n)

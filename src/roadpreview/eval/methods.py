@@ -62,6 +62,14 @@ METHODS: dict[str, MethodSpec] = {
     "imu-only": MethodSpec(
         "none", "imu-only", "IMU only (integrated gyro)", heave=False, color="C4"
     ),
+    # the gyro alone with the bias and time offset the Kalman fusion estimates (new)
+    "imu-estimated": MethodSpec(
+        "robust",
+        "imu-estimated",
+        "IMU with the fusion's bias and offset",
+        heave=False,
+        color="C5",
+    ),
     "fused-kalman": MethodSpec("robust", "kalman", "ours fused (Kalman)", color="C3"),
     "fused-fg": MethodSpec("robust", "factor-graph", "ours fused (factor graph)", color="C2"),
 }

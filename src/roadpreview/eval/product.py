@@ -23,7 +23,7 @@ Alerts are matched to the truth as in ``roadpreview replay --truth``
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -38,6 +38,7 @@ from roadpreview.types import Alert, Confirmation, FusionMode
 
 if TYPE_CHECKING:
     from roadpreview.eval.experiments import EvalData
+    from roadpreview.eval.runner import RecordingJob
 
 Array = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -253,6 +254,55 @@ def _threshold_for_rate(
         if total.fa_per_min <= rate:
             return float(thr)
     return math.inf
+
+
+def held_out_at_rate(
+    data: EvalData,
+    dataset: str,
+    detector: str,
+    alerts_at: Callable[[RecordingJob, float], Sequence[Alert]],
+    rate: float,
+    *,
+    stride: int | None = None,
+) -> dict[str, Any]:
+    """`operating_points`' held-out figure for any source of alerts: ``alerts_at(job,
+    threshold)`` over ``detector``'s grid (every ``plan.threshold_stride``-th); per fold the
+    lowest threshold keeping the training folds at or below ``rate`` false alarms per
+    minute, the held-out folds' recall (f|δ|/d >= `RECALL_MIN_SIGNAL_PX`) pooled.
+    ``stride``: every this many thresholds instead (at least the plan's)."""
+    by_key = {j.key: j for j in data.jobs[dataset]}
+    folds = _folds(sorted(by_key), data.plan.cv_k, data.plan.cv_seed)
+    step = max(stride or 1, data.plan.threshold_stride)
+    grid = THRESHOLD_GRIDS[detector][::step]
+    tallies = {
+        (key, thr): _tally(
+            alerts_at(job, thr), data.info(job), data.focal_px(job), RECALL_MIN_SIGNAL_PX
+        )
+        for key, job in by_key.items()
+        for thr in grid
+    }
+    held_out = _Tally()
+    chosen = []
+    for test in folds:
+        train = [k for k in by_key if k not in test]
+        thr = _threshold_for_rate(tallies, train, grid, rate)
+        chosen.append(thr)
+        for key in test:
+            last = tallies[(key, grid[-1])]
+            quiet = _Tally(expected=last.expected, minutes=last.minutes)
+            held_out.add(tallies[(key, thr)] if math.isfinite(thr) else quiet)
+    return {**held_out.as_dict(), "thresholds": [_f(t) for t in chosen]}
+
+
+def tally_at(
+    data: EvalData, dataset: str, alerts_of: Callable[[RecordingJob], Sequence[Alert]]
+) -> dict[str, Any]:
+    """Recall (f|δ|/d >= `RECALL_MIN_SIGNAL_PX`) and false alarms per minute of
+    ``alerts_of(job)`` over the data set, pooled."""
+    total = _Tally()
+    for job in data.jobs[dataset]:
+        total.add(_tally(alerts_of(job), data.info(job), data.focal_px(job), RECALL_MIN_SIGNAL_PX))
+    return total.as_dict()
 
 
 def product_default(data: EvalData, dataset: str = "wild") -> dict[str, Any]:

@@ -55,7 +55,7 @@ log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
 
 #: bump when the trace layout or the way traces are produced changes
-TRACE_FORMAT = 4
+TRACE_FORMAT = 5
 #: sub-packages and modules whose source does not change what a trace holds (the detectors
 #: run on the stored trajectory afterwards; the sinks only write files; the apps compose)
 _NOT_PIPELINE = ("eval", "cli", "bench", "sim", "anomaly", "sinks", "apps", "batch")
@@ -131,6 +131,8 @@ FLOAT_COLUMNS = (
     "y_left",
     "y_right",
     "heave_px",
+    "bias",
+    "time_offset",
     "box_x0",
     "box_y0",
     "box_x1",
@@ -447,7 +449,13 @@ def run_methods(folder: Path, methods: MethodSet) -> dict[str, Trace]:
     }
     recorders = {m: _TraceRecorder(m, start, inputs.camera.fy) for m in order}
     stage = SharedVision(pipes, reference, recorders)
-    run(sources, stage, status_period_s=methods.configs[reference].can.status_period_s)
+    ref = methods.configs[reference]
+    run(
+        sources,
+        stage,
+        status_period_s=ref.can.status_period_s,
+        frame_hold_s=stage.ref.frame_hold_s,
+    )
     if not recorders[reference].rows["t"]:
         raise InputDataError(f"{inputs.video}: no frame could be read")
     for rec in recorders.values():  # the shared vision step, split evenly

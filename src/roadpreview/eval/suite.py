@@ -26,6 +26,7 @@ from roadpreview.errors import ConfigError
 from roadpreview.eval import experiments as ex
 from roadpreview.eval import figures
 from roadpreview.eval.experiments import EvalData
+from roadpreview.eval.experiments.budget import e7_budget
 from roadpreview.eval.methods import METHODS, REFERENCE_METHOD, select_methods
 from roadpreview.eval.metrics import require_sklearn
 from roadpreview.eval.plan import EXPERIMENTS, EvalPlan
@@ -200,6 +201,8 @@ def run_experiments(
                 e6["calibration"], fig_dir / "e6_reliability.png"
             )
         res["e6"] = e6
+    if "e7" in experiments:
+        res["e7"] = e7_budget(data)
     return res
 
 

@@ -6,7 +6,6 @@ Back ends are chosen by name from `BACKENDS` (imported lazily)::
     fusion.push_gyro(t_imu, pitch_rate)
     fusion.push_visual(VisualPitch(t_key, t_frame, dphi, std, inlier_ratio, quality_ok))
     out = fusion.estimate(t_frame)          # FusedPitch: phi, std, mode, bias, time offset
-    y_c = compensation(y, out.phi, camera.fy)
 """
 
 from __future__ import annotations
@@ -18,7 +17,6 @@ from roadpreview.fusion.base import (
     RewindableBackEnd,
     VisualPitch,
 )
-from roadpreview.fusion.compensation import compensation
 from roadpreview.registry import build
 from roadpreview.types import FusionMode
 
@@ -28,6 +26,11 @@ BACKENDS: dict[str, tuple[str, str, str | None]] = {
     "factor-graph": ("roadpreview.fusion.factor_graph", "factor_graph_fusion", "FactorGraphConfig"),
     "visual-only": ("roadpreview.fusion.baselines", "VisualOnlyPitch", "VisualOnlyConfig"),
     "imu-only": ("roadpreview.fusion.baselines", "ImuOnlyPitch", "ImuOnlyConfig"),
+    "imu-estimated": (
+        "roadpreview.fusion.gyro_estimated",
+        "GyroWithEstimates",
+        "KalmanConfig",
+    ),
     "none": ("roadpreview.fusion.baselines", "ZeroPitchFusion", None),
 }
 
@@ -54,6 +57,5 @@ __all__ = [
     "PitchFusion",
     "RewindableBackEnd",
     "VisualPitch",
-    "compensation",
     "make_fusion",
 ]

@@ -49,7 +49,6 @@ from dataclasses import dataclass
 
 from roadpreview.configtools import check_ranges, param
 from roadpreview.errors import ConfigError
-from roadpreview.fusion.compensation import heave_term_px
 from roadpreview.plausibility import (
     REJECTED_RANGE,
     REJECTED_SPIKE,
@@ -355,45 +354,3 @@ class HeaveObserver:
         tb, zb, _ = hist[i + 1]
         w = (t - ta) / (tb - ta) if tb > ta else 1.0
         return HeaveEstimate(t, za + w * (zb - za), True, lever)
-
-
-class HeaveTerm:
-    """The heave term f Δz / d that the pipeline subtracts from y, per frame, never jumping.
-
-    The lead's distance d comes from the vision; a frame without one (or one below
-    ``min_distance_m``, more often a wrong box than a real gap) uses the last good one
-    for ``distance_hold_s``. While Δz or d is unknown the term is held at its last
-    value; when both are back it goes on from there, ``held + f (Δz - Δz_on) / d``: a
-    constant offset does not change s, a jump would look like a bump. A new target
-    starts the term again from 0 (the detector's window restarts anyway).
-    """
-
-    def __init__(self, config: HeaveConfig, focal_px: float) -> None:
-        self.config = config
-        self.focal_px = focal_px
-        self.reset()
-
-    def reset(self) -> None:
-        self._t_d = -math.inf  # time of the last good distance
-        self._d = math.nan  # the last good distance, m
-        self._ref: tuple[float, float] | None = None  # (Δz, term) when the term resumed
-        self.px = 0.0  #: the term of the last frame, px
-        self.active = False  #: the last frame had both Δz and d (the term followed Δz)
-
-    def update(self, t: float, est: HeaveEstimate, distance_m: float, new_target: bool) -> float:
-        """The term (px, v down) for the frame at ``t`` given the observer's estimate."""
-        c = self.config
-        if new_target:
-            self.reset()
-        if math.isfinite(distance_m) and distance_m >= max(c.min_distance_m, 1e-3):
-            self._t_d, self._d = t, distance_m
-        if not est.available or t - self._t_d > c.distance_hold_s:
-            self._ref = None
-            self.active = False
-            return self.px
-        if self._ref is None:
-            self._ref = (est.dz_m, self.px)
-        z_on, px_on = self._ref
-        self.px = px_on + float(heave_term_px(est.dz_m - z_on, self._d, self.focal_px))
-        self.active = True
-        return self.px

@@ -13,8 +13,8 @@ Per frame (``push`` of a `CameraFrame`):
 3. fusion: the visual measurement (or a vision failure) with the gyro samples
    pushed so far -> φ(t), its std, the mode, the gyro bias, the time offset;
 4. compensation ``y_c = y - f tan φ - f Δz_cam / d`` (paper eq. 4 plus the camera's heave
-   Δz_cam from the accelerometer, `roadpreview.fusion.heave`, over the lead's distance d;
-   no heave term while either is unknown), also for the halves;
+   Δz_cam from the accelerometer over the lead's distance d; the term held while either
+   is unknown), also for the halves: one stage, `roadpreview.compensation.Compensator`;
 5. detector: s(t) (paper eq. 1), threshold, NMS -> events -> alerts.
 """
 
@@ -30,10 +30,10 @@ from roadpreview.anomaly.base import AnomalyEvent
 from roadpreview.anomaly.confirm import EgoConfirmer
 from roadpreview.anomaly.roughness import RoadRoughness
 from roadpreview.camera import CameraModel
+from roadpreview.compensation import Compensator
 from roadpreview.ego.kinematics import EgoSpeed, HorizonFilter, LeadKinematics
 from roadpreview.ego.vertical import EgoVerticalMonitor
-from roadpreview.fusion import FusedPitch, VisualPitch, compensation, make_fusion
-from roadpreview.fusion.heave import HeaveObserver, HeaveTerm
+from roadpreview.fusion import FusedPitch, VisualPitch, make_fusion
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pitch import PitchEstimator, make_estimator
 from roadpreview.types import (
@@ -52,6 +52,10 @@ from roadpreview.types import (
 from roadpreview.vision.frontend import FrameVision, VisionFrontEnd
 
 log = logging.getLogger(__name__)
+
+#: the frame hold shrinks by at most this per frame (`Pipeline.frame_hold_s`), s: less than
+#: any frame interval, so that frames never fall due together
+HOLD_STEP_S = 0.005
 
 
 @dataclass(frozen=True)
@@ -210,14 +214,12 @@ class Pipeline:
         self.roughness = RoadRoughness(cfg.anomaly.roughness, cfg.anomaly.two_axle.vehicle)
         self.confirmer = EgoConfirmer(cfg.anomaly.confirm)
         self._lead = LeadKinematics(cfg.lead.window_s)
-        on = cfg.heave.enabled
-        self.heave = HeaveObserver(cfg.heave, cfg.plausibility) if on else None
-        self._heave_term = HeaveTerm(cfg.heave, camera.fy) if on else None
+        self.compensator = Compensator(camera.fy, cfg.heave, cfg.plausibility)
         self._speed = EgoSpeed()
         self._horizon = HorizonFilter(cfg.fusion.horizon_highpass_s)
         self.pitch_divergences = 0  #: frames whose fused pitch was beyond max_pitch_rad
+        self._hold_s = math.nan  # the frame hold last given to the run loop
         self._key_index = -1
-        self._phi = 0.0
         self.frames = 0
         self.alerts_sent = 0
         #: samples the sources lost (undecodable, garbled, rejected) so far, for the
@@ -241,8 +243,7 @@ class Pipeline:
         return None
 
     def push_imu(self, sample: ImuSample) -> None:
-        if self.heave is not None:
-            self.heave.push(sample)
+        self.compensator.push_imu(sample)
         self.ego_vertical.push(sample.t_s, sample.accel_m_s2[2])
         roll, pitch, yaw = sample.rates_rad_s
         if math.isfinite(pitch):
@@ -261,6 +262,25 @@ class Pipeline:
         """Process one camera frame (its image None or garbage: no target)."""
         t = frame.t_s
         return self.push_vision(t, self.vision.process(t, frame.image, pitch_rad=self.pitch_rad))
+
+    def frame_hold_s(self) -> float:
+        """How long the run loop should hold the next camera frame back (`roadpreview.loop`;
+        asked once per frame): the estimated camera-IMU offset plus ``[fusion]
+        frame_hold_margin_s``, at most ``frame_hold_s``; ``frame_hold_s`` until an offset is
+        known. It shrinks by at most `HOLD_STEP_S` per frame, so that a shorter hold never
+        makes two frames due at once (a live loop would take that for falling behind)."""
+        cfg = self.config.fusion
+        r = self.last
+        tau = r.time_offset if r is not None else math.nan
+        if not math.isfinite(tau) or tau == 0.0:  # not estimated yet
+            target = cfg.frame_hold_s
+        else:
+            target = min(cfg.frame_hold_s, max(0.0, tau) + cfg.frame_hold_margin_s)
+        hold = self._hold_s
+        self._hold_s = (
+            target if target >= hold or math.isnan(hold) else max(target, hold - HOLD_STEP_S)
+        )
+        return self._hold_s
 
     @property
     def pitch_rad(self) -> float:
@@ -308,35 +328,37 @@ class Pipeline:
             )
             self.fusion.reset()
         phi = fused.phi if math.isfinite(fused.phi) and not diverged else 0.0
-        self._phi = phi
         self._horizon.update(t, phi)
 
         lead = fv.lead
         f = self.camera.fy
-        heave_m, heave_px = self._heave(t, fused, lead.distance_m, lead.target_changed)
-        y_c, y_c_l, y_c_r = (
-            float(compensation(v, phi, f)) - heave_px
-            if math.isfinite(v) and not diverged
-            else math.nan
-            for v in (lead.y, lead.y_left, lead.y_right)
+        comp = self.compensator.frame(
+            t,
+            (lead.y, lead.y_left, lead.y_right),
+            phi,
+            time_offset_s=fused.time_offset,
+            distance_m=lead.distance_m,
+            target_changed=lead.target_changed,
+            valid=not diverged,
         )
+        y_c = comp.y_c
         ego_speed = self._speed.speed_mps
         if lead.target_changed:
             self._lead.reset()
         lead_accel = self._lead.push(t, lead.distance_m, self._speed.accel)
-        ego_v = self.ego_vertical.take()
+        ego_v = self.ego_vertical.take(t)
         sample = TrajectorySample(
             t=t,
             y_c=y_c,
-            y_c_left=y_c_l,
-            y_c_right=y_c_r,
+            y_c_left=comp.y_c_left,
+            y_c_right=comp.y_c_right,
             lead_distance_m=lead.distance_m,
             lead_distance_std_m=lead.distance_std_m,
             mode=fused.mode,
             lead_accel_mps2=lead_accel,
             ego_speed_mps=ego_speed,
             valid=bool(lead) and math.isfinite(y_c),
-            compensation_px=f * math.tan(phi) + heave_px,
+            compensation_px=comp.total_px,
             focal_px=f,
             ego_accel_rms_mps2=ego_v.rms_mps2,
             ego_accel_peak_mps2=ego_v.peak_mps2,
@@ -388,8 +410,8 @@ class Pipeline:
             target_changed=lead.target_changed,
             lead_accel_mps2=lead_accel,
             ego_speed_mps=ego_speed,
-            heave_m=heave_m,
-            heave_px=heave_px,
+            heave_m=comp.heave_m,
+            heave_px=comp.heave_px,
             score=df.score if df else nan,
             score_threshold=df.threshold if df else nan,
             score_t=df.t_score if df else nan,
@@ -405,19 +427,6 @@ class Pipeline:
         self.frames += 1
         self.last = result
         return result
-
-    def _heave(
-        self, t: float, fused: FusedPitch, distance_m: float, target_changed: bool
-    ) -> tuple[float, float]:
-        """The camera's heave at frame ``t`` (m, NaN if unavailable) and the heave term
-        subtracted from y (px, `HeaveTerm`: held while unknown, never jumping). The IMU
-        is queried on its own clock: frame time + the fusion's time offset."""
-        if self.heave is None or self._heave_term is None:
-            return math.nan, 0.0
-        self.heave.set_pitch(self._phi)
-        offset = fused.time_offset if math.isfinite(fused.time_offset) else 0.0
-        est = self.heave.at(t + offset)
-        return est.dz_m, self._heave_term.update(t, est, distance_m, target_changed)
 
     def finish(self) -> list[Alert]:
         """End of input: alerts for events still held by the non-maximum suppression."""

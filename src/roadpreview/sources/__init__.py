@@ -48,9 +48,13 @@ class Source(Protocol):
         ...
 
 
-def merge_key(sample: Sample) -> tuple[float, int]:
-    """Time order, and IMU/speed samples before a frame stamped at the same instant."""
-    return (sample.t_s, 1 if isinstance(sample, CameraFrame) else 0)
+def merge_key(sample: Sample, frame_hold_s: float = 0.0) -> tuple[float, int]:
+    """Time order, and IMU/speed samples before a frame stamped at the same instant; a
+    camera frame ordered ``frame_hold_s`` after its stamp (the samples stamped up to then
+    go first: the run loop's hold, `roadpreview.loop.hold_frames`)."""
+    if isinstance(sample, CameraFrame):
+        return (sample.t_s + frame_hold_s, 1)
+    return (sample.t_s, 0)
 
 
 def shifted(sample: InputSample, offset_s: float) -> InputSample:

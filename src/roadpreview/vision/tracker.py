@@ -92,6 +92,21 @@ class LeadTrackerConfig:
         " nearest box); a 720p camera at 1.3 m with f = 706 px sees the road from 2.5 m on."
         " 0 with the box finder: the user's box is the lead",
     )
+    min_ttc_s: float = param(
+        1.0,
+        unit="s",
+        ge=0.0,
+        le=10.0,
+        help="a target whose points spread apart as a time to contact below this (their"
+        " scale's growth rate, smoothed over ttc_smoothing_s, above 1 / min_ttc_s) is no lead"
+        " to preview: the road or a parked car the ego runs up to, which the motion finder"
+        " boxed (on the wild set: road patches tracked from 5 m down to 1 m, the row moving"
+        " 100-200 px in a second) - or an emergency, which is not the preview's. Track lost;"
+        " 0: no check",
+    )
+    ttc_smoothing_s: float = param(
+        0.2, unit="s", gt=0.0, le=2.0, help="time constant of the scale-rate smoothing"
+    )
     match_iou: float = param(0.3, gt=0.0, le=1.0, help="a detection this close is the target")
     max_box_width_frac: float = param(
         0.6,
@@ -318,6 +333,8 @@ class LeadVehicleTracker:
         self._n_seeded = 0
         self._box: Box = (0.0, 0.0, 0.0, 0.0)
         self._size_gated_since = math.nan  # first refresh of a running size disagreement
+        self._growth = 0.0  # smoothed growth rate of the points' scale, 1/s
+        self._growth_t = math.nan
         self._anchor = (math.nan, math.nan)
         self._anchor_l = (math.nan, math.nan)
         self._anchor_r = (math.nan, math.nan)
@@ -397,6 +414,7 @@ class LeadVehicleTracker:
         self._anchor_r = (float(mr[0]), float(mr[1]))
         self._pending = None
         self._size_gated_since = math.nan
+        self._growth, self._growth_t = 0.0, ctx.t
         return True
 
     # -- per frame --------------------------------------------------------------------
@@ -598,11 +616,25 @@ class LeadVehicleTracker:
             return "the lead left the image", False
         if box[2] - box[0] > cfg.max_box_width_frac * W:
             return "track lost (the box grew over the road)", False
+        if cfg.min_ttc_s > 0.0 and self._expanding(float(model[2]), ctx.t):
+            return f"track lost (time to contact {1.0 / self._growth:.2f} s: not a lead)", False
         self._box = box
         self._points = b[inl].astype(np.float32)
         if n_in < cfg.reseed_fraction * self._n_seeded and self._seed(gray, self._box, None):
             return "", True
         return "", False
+
+    def _expanding(self, scale_step: float, t: float) -> bool:
+        """Update the smoothed growth rate of the points' scale (1/s) with this frame's scale
+        step; True when it implies a time to contact below ``min_ttc_s``."""
+        cfg = self.config
+        dt = t - self._growth_t
+        self._growth_t = t
+        if not 0.0 < dt < 1.0:
+            return False
+        a = min(1.0, dt / cfg.ttc_smoothing_s)
+        self._growth += a * (scale_step / dt - self._growth)
+        return self._growth * cfg.min_ttc_s > 1.0
 
     def _moved_box(self, model: NDArray[np.float64]) -> Box:
         x0, y0, x1, y1 = self._box

@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from roadpreview.eval.report.budget import e7_section
 from roadpreview.eval.report.experiments import (
     e1_section,
     e2_section,
@@ -101,6 +102,8 @@ def render(d: Mapping[str, Any], *, fig_prefix: str = "eval/", command: str = ""
         e5_section(d, w, fig_prefix)
     if "e6" in res:
         e6_section(d, w, fig_prefix)
+    if "e7" in res:
+        e7_section(d, w)
     _timing_section(d, w)
     return "\n".join(out) + "\n"
 

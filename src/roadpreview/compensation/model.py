@@ -1,5 +1,7 @@
-"""Paper eq. (4): the lead vehicle's image row corrected for the ego camera's pitch, and
-our extension for the camera's heave (``docs/method.md``, "Heave")."""
+"""The compensation model, over arrays: paper eq. (4), the lead vehicle's image row corrected
+for the ego camera's pitch, and our extension for the camera's heave (``docs/method.md``,
+"Heave"). The streaming stage (`roadpreview.compensation.stage`) and the evaluation's error
+budget (its truth substitutions) both compute y_c here."""
 
 from __future__ import annotations
 
@@ -57,3 +59,11 @@ def compensation(
     if heave_m is not None and distance_m is not None:
         out = out - heave_term_px(heave_m, distance_m, float(f))
     return out
+
+
+def compensate(
+    y: ArrayLike, phi: ArrayLike, f: float, heave_px: ArrayLike = 0.0
+) -> NDArray[np.float64]:
+    """y_c = y - f tan(phi) - heave_px: `compensation` with the heave term already in pixels
+    (`heave_term_px`, or the pipeline's held `HeaveTerm`). NaN in any input stays NaN."""
+    return compensation(y, phi, f) - np.asarray(heave_px, dtype=np.float64)

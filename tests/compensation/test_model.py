@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from roadpreview.camera import CameraModel
+from roadpreview.compensation import compensation
 from roadpreview.errors import InputDataError
-from roadpreview.fusion import compensation
 
 
 def test_a_pitching_camera_is_compensated_exactly() -> None:
