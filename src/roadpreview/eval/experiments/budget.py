@@ -254,7 +254,8 @@ def budget(
 
             if dataset == "wild":
                 aucs = _aucs(data, dataset, traces, anomaly, (alerts_at, shipped))
-                if name == "product" or name.startswith("+"):  # (the sweep: 4 runs a drive)
+                # the sweep (3 more runs a drive) for the product and the truth's rows
+                if name in ("product", "+ pitch", "+ " + " + ".join(TERMS)):
                     held = held_out_at_rate(
                         data, dataset, det_p, alerts_at, BUDGET_FA_PER_MIN, stride=2
                     )
