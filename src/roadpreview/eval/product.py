@@ -212,23 +212,10 @@ def operating_points(data: EvalData, dataset: str = "wild") -> dict[str, Any]:
                 for key in by_key:
                     total.add(tallies[(key, thr)])
                 curve.append({"threshold": thr, **total.as_dict()})
-            per_rate: dict[str, Any] = {}
-            for rate in FA_PER_MIN:
-                held_out = _Tally()
-                chosen = []
-                for test in folds:
-                    train = [k for k in by_key if k not in test]
-                    thr = _threshold_for_rate(tallies, train, grid, rate)
-                    chosen.append(thr)
-                    for key in test:
-                        # no threshold of the grid is quiet enough: nothing is sent
-                        quiet = _Tally(expected=tallies[(key, grid[-1])].expected)
-                        quiet.minutes = tallies[(key, grid[-1])].minutes
-                        held_out.add(tallies[(key, thr)] if math.isfinite(thr) else quiet)
-                per_rate[f"{rate:g}"] = {
-                    **held_out.as_dict(),
-                    "thresholds": [_f(t) for t in chosen],
-                }
+            per_rate = {
+                f"{rate:g}": _held_out(tallies, list(by_key), folds, grid, rate)
+                for rate in FA_PER_MIN
+            }
             res[m] = {"curve": curve, "held_out": per_rate}
         out[det] = res
     return {
@@ -281,13 +268,27 @@ def held_out_at_rate(
         for key, job in by_key.items()
         for thr in grid
     }
+    return _held_out(tallies, list(by_key), folds, grid, rate)
+
+
+def _held_out(
+    tallies: Mapping[tuple[str, float], _Tally],
+    keys: Sequence[str],
+    folds: Sequence[Sequence[str]],
+    grid: Sequence[float],
+    rate: float,
+) -> dict[str, Any]:
+    """Per fold the lowest threshold keeping the other folds at or below ``rate`` false
+    alarms per minute (`_threshold_for_rate`); the held-out folds' tallies pooled, and the
+    thresholds chosen."""
     held_out = _Tally()
     chosen = []
     for test in folds:
-        train = [k for k in by_key if k not in test]
+        train = [k for k in keys if k not in test]
         thr = _threshold_for_rate(tallies, train, grid, rate)
         chosen.append(thr)
         for key in test:
+            # no threshold of the grid is quiet enough: nothing is sent
             last = tallies[(key, grid[-1])]
             quiet = _Tally(expected=last.expected, minutes=last.minutes)
             held_out.add(tallies[(key, thr)] if math.isfinite(thr) else quiet)
