@@ -683,6 +683,8 @@ class _LoopState:
             modes.append((r.t, r.mode, why))
             log.info("event=mode_change t=%.3f mode=%s reason=%r", r.t, r.mode.name, why)
         summary.alerts.extend(r.alerts)
+        summary.provisional.extend(r.provisional)
+        summary.cancelled.extend(r.cancelled)
         summary.confirmations.extend(r.confirmations)
         status = self._status()
         self._each_sink(lambda s: s.on_frame(sample, r, status))

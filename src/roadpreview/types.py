@@ -150,6 +150,20 @@ Sample: TypeAlias = CameraFrame | ImuSample | SpeedSample
 
 
 # -- outputs ------------------------------------------------------------------------------
+class AlertState(IntEnum):
+    """Where an alert stands; the integer goes on CAN (``RP_ALERT_DETAIL.AlertState``).
+
+    An alert is PROVISIONAL from the lead's front-axle response alone, then CONFIRMED by the
+    two-axle fit under the same id, or ended CANCELLED (``RP_ALERT_END``, cause
+    NOT_CONFIRMED) when the rear axle does not match. An alert the two-axle fit raises
+    without a provisional one before it is CONFIRMED from its first frame (every alert of
+    DBC version 1 was: raw 0).
+    """
+
+    CONFIRMED = 0  #: the two-axle fit matched: height and length are refined
+    PROVISIONAL = 1  #: the front axle's response alone: confirmation or cancellation follows
+
+
 @dataclass(frozen=True, slots=True)
 class Alert:
     """A predictive alert about one road anomaly ahead.
@@ -177,6 +191,14 @@ class Alert:
     height_std_mm: float | None = None  #: std of ``height_mm`` (None: unknown)
     length_m: float | None = None  #: estimated length along the road (None: not resolved)
     lead_speed_mps: float | None = None  #: the lead's speed when it crossed, m/s
+    state: AlertState = AlertState.CONFIRMED  #: provisional or confirmed (`AlertState`)
+    #: when this alert id was first sent (its provisional emission), s; NaN: at ``t_emit_s``
+    t_first_s: float = math.nan
+
+    @property
+    def t_first_sent_s(self) -> float:
+        """When the first ``RP_ALERT`` of this alert went out (provisional or not), s."""
+        return self.t_first_s if math.isfinite(self.t_first_s) else self.t_emit_s
 
     @property
     def arrival_t_s(self) -> float | None:
@@ -244,9 +266,40 @@ class Status:
     input_problems_total: Mapping[str, int] = field(default_factory=dict)
 
 
+@dataclass(frozen=True, slots=True)
+class RoadPreview:
+    """The road ahead along the ego's path, where the lead's wheels have been (``RP_PREVIEW``).
+
+    Bins of ``bin_m`` from the ego's front axle (bin k covers [start_m + k bin_m, start_m +
+    (k + 1) bin_m) ahead of it) to the lead's rear axle. ``height_m`` and ``std_m`` are
+    (tracks, bins): one track (both wheel tracks alike) or two (left, right), heights
+    relative to the road's local mean level (up +); NaN where a bin has no valid estimate.
+    """
+
+    t_s: float  #: the frame the preview is as of, s
+    bin_m: float  #: bin length along the path, m
+    start_m: float  #: near edge of bin 0 ahead of the ego's front axle, m
+    height_m: NDArray[np.float64]  #: (tracks, bins) road height, m (NaN: no estimate)
+    std_m: NDArray[np.float64]  #: (tracks, bins) its standard deviation, m (NaN: none)
+    sides: bool  #: True: rows are the left and the right track; False: one row for both
+    lead_rear_axle_m: float  #: the lead's rear axle ahead of the ego's front axle, m
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """(tracks, bins): the bins with an estimate."""
+        return np.isfinite(self.height_m) & np.isfinite(self.std_m)
+
+    @property
+    def centres_m(self) -> NDArray[np.float64]:
+        """The bins' centres ahead of the ego's front axle, m."""
+        n = self.height_m.shape[1]
+        return np.asarray(self.start_m + self.bin_m * (np.arange(n) + 0.5), dtype=np.float64)
+
+
 __all__ = [
     "ISO8608_CLASSES",
     "Alert",
+    "AlertState",
     "CameraFrame",
     "Confirmation",
     "ConfirmationResult",
@@ -254,6 +307,7 @@ __all__ = [
     "Image",
     "ImuSample",
     "InputSample",
+    "RoadPreview",
     "RoadState",
     "Sample",
     "Side",

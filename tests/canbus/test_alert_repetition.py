@@ -95,6 +95,9 @@ def _drive(
         result = SimpleNamespace(
             t=t,
             alerts=tuple(alerts.get(k, ())),
+            provisional=(),
+            cancelled=(),
+            preview=None,
             confirmations=tuple((confirmations or {}).get(k, ())),
             ego_speed_mps=speed,
         )
@@ -184,7 +187,15 @@ def test_the_distance_driven_before_the_emission_is_taken_from_the_odometry() ->
         t = T0 + k / FPS
         v = 5.0 if k <= FPS else 15.0
         alerts = (_alert(4, T0 + 0.5, T0 + 1.5, 30.2),) if k == int(1.5 * FPS) else ()
-        result = SimpleNamespace(t=t, alerts=alerts, confirmations=(), ego_speed_mps=v)
+        result = SimpleNamespace(
+            t=t,
+            alerts=alerts,
+            provisional=(),
+            cancelled=(),
+            preview=None,
+            confirmations=(),
+            ego_speed_mps=v,
+        )
         sink.on_frame(CameraFrame(t, None), cast(FrameResult, result), STATUS)
     (first,) = _of(ReceivedAlert, _decoded(sink))
     # driven 0.5..1.0 s at 5 m/s, the frame interval 1.0..1.033 s as the trapezoid's mean

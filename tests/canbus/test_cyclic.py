@@ -59,6 +59,9 @@ class _Result:
     pitch_reason: str = ""
     ego_speed_mps: float | None = 10.0
     alerts: list[Alert] = field(default_factory=list)
+    provisional: tuple[Alert, ...] = ()
+    cancelled: tuple[Alert, ...] = ()
+    preview: None = None
     confirmations: list[Any] = field(default_factory=list)
 
 

@@ -22,6 +22,7 @@ from roadpreview.canbus.dbc import (
     RP_ALERT_END,
     RP_CONFIRM,
     RP_INPUT_STATUS,
+    RP_PREVIEW,
     RP_ROAD_STATUS,
     RP_STATUS,
     VEHICLE_SPEED,
@@ -124,6 +125,7 @@ def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> Non
         RP_CONFIRM: 0x204,
         RP_ALERT_END: 0x205,
         RP_INPUT_STATUS: 0x206,
+        RP_PREVIEW: 0x207,
     }
     assert {m.name: m.frame_id for m in db.messages} == inputs | outputs
     for m in db.messages:
@@ -139,7 +141,10 @@ def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> Non
             assert m.senders == ["ROADPREVIEW"]
         assert m.length == 8
         assert m.comment
-        assert sum(s.length for s in m.signals) <= 64
+        # per multiplexer value (RP_PREVIEW's pages): the signals of one frame fit its 64 bits
+        for mux in {i for s in m.signals for i in s.multiplexer_ids or [-1]}:  # -1: plain
+            here = [s for s in m.signals if s.multiplexer_ids is None or mux in s.multiplexer_ids]
+            assert sum(s.length for s in here) <= 64, (m.name, mux)
         layout = e2e_layout(m)
         assert layout.data_id == m.frame_id
         for s in m.signals:
@@ -152,8 +157,8 @@ def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> Non
     for cyclic in (RP_STATUS, RP_ROAD_STATUS):
         assert db.get_message_by_name(cyclic).cycle_time == 100
         assert db.get_message_by_name(cyclic).send_type == "Cyclic"
-    # every 100 ms while an alert is active / the inputs have problems
-    for repeated in (RP_ALERT, RP_ALERT_DETAIL, RP_INPUT_STATUS):
+    # every 100 ms while an alert is active / the inputs have problems / a preview exists
+    for repeated in (RP_ALERT, RP_ALERT_DETAIL, RP_INPUT_STATUS, RP_PREVIEW):
         assert db.get_message_by_name(repeated).cycle_time == 100
         assert db.get_message_by_name(repeated).send_type == "IfActive"
     for event in (RP_CONFIRM, RP_ALERT_END):
@@ -172,6 +177,7 @@ def test_the_top_comment_lists_every_output_id() -> None:
         (RP_CONFIRM, 0x204),
         (RP_ALERT_END, 0x205),
         (RP_INPUT_STATUS, 0x206),
+        (RP_PREVIEW, 0x207),
     ):
         assert f"0x{fid:03X} {name}" in top, name
 
@@ -191,6 +197,7 @@ OUTPUT_LAYOUTS: dict[str, dict[str, tuple[int, int, bool, float, float, float, i
     },
     RP_ALERT_DETAIL: {
         "DetailDetector": (12, 2, False, 1, 0, 1, None),
+        "AlertState": (14, 2, False, 1, 0, 1, None),  # version 2
         "AlertId": (16, 8, False, 1, 0, 255, None),
         "AlertHeightStd": (24, 6, False, 2, 0, 124, 63),
         "AlertScore": (30, 8, False, 0.2, 0, 50.8, 255),
@@ -203,6 +210,7 @@ OUTPUT_LAYOUTS: dict[str, dict[str, tuple[int, int, bool, float, float, float, i
         "EndAlertId": (16, 8, False, 1, 0, 255, None),
         "EndAlertSends": (24, 8, False, 1, 0, 255, None),
         "EndDistance": (32, 10, True, 0.2, -102.2, 102.2, -512),
+        "EndCauseEx": (42, 3, False, 1, 0, 4, None),  # version 2
     },
     RP_CONFIRM: {
         "ConfirmOutcome": (12, 2, False, 1, 0, 2, None),

@@ -90,7 +90,15 @@ def _result(
     """The part of a `FrameResult` the CAN sinks read."""
     return cast(
         FrameResult,
-        SimpleNamespace(t=t, alerts=tuple(alerts), confirmations=confirms, ego_speed_mps=speed),
+        SimpleNamespace(
+            t=t,
+            alerts=tuple(alerts),
+            provisional=(),
+            cancelled=(),
+            preview=None,
+            confirmations=confirms,
+            ego_speed_mps=speed,
+        ),
     )
 
 

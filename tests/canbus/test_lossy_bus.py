@@ -227,7 +227,13 @@ def synthetic() -> _Synthetic:
     for i in range(round(duration * FPS) + 1):
         t = i / FPS
         result = SimpleNamespace(
-            t=t, alerts=tuple(alerts_at.get(i, ())), confirmations=(), ego_speed_mps=_speed(t)
+            t=t,
+            alerts=tuple(alerts_at.get(i, ())),
+            provisional=(),
+            cancelled=(),
+            preview=None,
+            confirmations=(),
+            ego_speed_mps=_speed(t),
         )
         sink.on_frame(CameraFrame(t, None), cast(FrameResult, result), status)
         if t >= next_status:

@@ -582,11 +582,15 @@ def test_enum_values_on_can_match_the_code(strict_db: Database) -> None:
         (RP_ALERT, "AlertSide", Side),
         (RP_CONFIRM, "ConfirmOutcome", Confirmation),
         (RP_ALERT_END, "EndReason", EndReason),
-        (RP_ALERT_END, "EndCause", EndCause),
+        (RP_ALERT_END, "EndCauseEx", EndCause),  # the full cause (version 2)
     ):
         choices = strict_db.get_message_by_name(message).get_signal_by_name(signal).choices
         assert choices is not None
         assert {int(k): str(v) for k, v in choices.items()} == {int(e): e.name for e in enum}
+    # the 2-bit EndCause of version 1 has the causes that fit it
+    v1 = strict_db.get_message_by_name(RP_ALERT_END).get_signal_by_name("EndCause").choices
+    assert v1 is not None
+    assert {int(k): str(v) for k, v in v1.items()} == {int(e): e.name for e in EndCause if e <= 3}
     supp = strict_db.get_message_by_name(RP_STATUS).get_signal_by_name("StatusSuppression")
     assert supp.choices is not None
     assert str(supp.choices[int(SuppressionReason.LEAD_ACCEL)]) == "LEAD_ACCEL"

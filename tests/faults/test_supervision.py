@@ -54,6 +54,9 @@ class _Result:
     mode: FusionMode = FusionMode.FUSED
     pitch_reason: str = ""
     alerts: list[Alert] = field(default_factory=list)
+    provisional: tuple[Alert, ...] = ()
+    cancelled: tuple[Alert, ...] = ()
+    preview: None = None
     confirmations: list[Any] = field(default_factory=list)
 
 

@@ -97,6 +97,9 @@ class _Result:
     alerts: list[Alert]
     confirmations: list[ConfirmationResult]
     ego_speed_mps: float | None = 13.8
+    provisional: tuple[Alert, ...] = ()
+    cancelled: tuple[Alert, ...] = ()
+    preview: None = None
 
 
 class _Log(CanMemorySink):

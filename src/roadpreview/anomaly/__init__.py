@@ -6,8 +6,14 @@ from __future__ import annotations
 import importlib
 from dataclasses import replace
 
-from roadpreview.anomaly.alert import AlertBuilder
-from roadpreview.anomaly.base import AnomalyEvent, Detector, DetectorFrame, TrajectorySample
+from roadpreview.anomaly.alert import AlertBatch, AlertBuilder
+from roadpreview.anomaly.base import (
+    AnomalyEvent,
+    Detector,
+    DetectorFrame,
+    EventKind,
+    TrajectorySample,
+)
 from roadpreview.anomaly.config import (
     DETECTORS,
     AlertConfig,
@@ -44,6 +50,7 @@ def make_detector(config: AnomalyConfig, focal_px: float | None = None) -> Detec
 __all__ = [
     "DETECTORS",
     "Alert",
+    "AlertBatch",
     "AlertBuilder",
     "AlertConfig",
     "AnomalyConfig",
@@ -52,6 +59,7 @@ __all__ = [
     "DetectorConfig",
     "DetectorFrame",
     "DetectorRun",
+    "EventKind",
     "PeakPicker",
     "Side",
     "SignalModel",

@@ -5,6 +5,11 @@
 / ego speed from CAN), how strong it is (s in px and a height estimate from
 the paper's s = α f δ / d + β), which side, how confident we are, and the
 fusion mode. Suppressed events give no alert (``build`` returns None).
+
+Provisional events (`EventKind.PROVISIONAL`) give a PROVISIONAL alert with a new id; the
+two-axle event that confirms one (its ``ref``) gives the CONFIRMED alert under the same id,
+with ``t_first_s`` the provisional one's emission; a cancellation (`EventKind.CANCELLED`)
+gives back, through `cancel`, the provisional alert it ends.
 ``roadpreview.canbus`` puts alerts on the bus (message ``RP_ALERT``).
 """
 
@@ -12,11 +17,27 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from dataclasses import dataclass, replace
 
-from roadpreview.anomaly.base import AnomalyEvent
+from roadpreview.anomaly.base import AnomalyEvent, EventKind
 from roadpreview.anomaly.config import AlertConfig, SignalModel
 from roadpreview.configtools import check_ranges
-from roadpreview.types import Alert
+from roadpreview.types import Alert, AlertState
+
+
+@dataclass(frozen=True)
+class AlertBatch:
+    """A frame's alerts by kind."""
+
+    #: CONFIRMED alerts: new ones, and provisional ones confirmed (their id again)
+    confirmed: tuple[Alert, ...] = ()
+    provisional: tuple[Alert, ...] = ()  #: PROVISIONAL alerts raised
+    cancelled: tuple[Alert, ...] = ()  #: provisional alerts the two-axle fit did not confirm
+
+    @property
+    def new_ids(self) -> int:
+        """Alert ids this batch raised (a confirmation keeps its provisional one's id)."""
+        return len(self.provisional) + sum(not math.isfinite(a.t_first_s) for a in self.confirmed)
 
 
 class AlertBuilder:
@@ -30,6 +51,7 @@ class AlertBuilder:
         self.config.validate()
         self.signal = signal or SignalModel()
         self.alerts_built = 0  #: alerts built so far (the last one's id)
+        self._provisional: dict[int, Alert] = {}  # by event ref: waiting for confirmation
 
     def confidence(self, event: AnomalyEvent) -> float:
         """Heuristic confidence in [0, 1] (docs/detector.md).
@@ -45,8 +67,9 @@ class AlertBuilder:
         return float(min(1.0, max(0.0, margin * event.valid_fraction * mode)))
 
     def build(self, event: AnomalyEvent) -> Alert | None:
-        """The alert for ``event``; None when the event is suppressed."""
-        if event.suppressed:
+        """The alert for ``event``; None when the event is suppressed or a cancellation
+        (`cancel`)."""
+        if event.suppressed or event.kind is EventKind.CANCELLED:
             return None
         d = event.lead_distance_m
         ahead = event.anomaly_distance_m if math.isfinite(event.anomaly_distance_m) else d
@@ -66,8 +89,14 @@ class AlertBuilder:
         confidence = event.confidence
         if not math.isfinite(confidence):
             confidence = self.confidence(event)
-        self.alerts_built += 1
-        return Alert(
+        earlier = self._provisional.pop(event.ref, None) if event.ref else None
+        if earlier is None:
+            self.alerts_built += 1
+            alert_id, t_first = self.alerts_built, math.nan
+        else:
+            alert_id, t_first = earlier.alert_id, earlier.t_emit_s
+        provisional = event.kind is EventKind.PROVISIONAL
+        alert = Alert(
             t_s=event.t_s,
             t_emit_s=event.t_emit_s,
             distance_m=distance,
@@ -77,11 +106,40 @@ class AlertBuilder:
             side=event.side,
             confidence=float(min(1.0, max(0.0, confidence))),
             mode=event.mode,
-            alert_id=self.alerts_built,
+            alert_id=alert_id,
             height_std_mm=_mm(event.height_std_m),
             length_m=event.length_m if math.isfinite(event.length_m) else None,
             lead_speed_mps=event.lead_speed_mps if math.isfinite(event.lead_speed_mps) else None,
+            state=AlertState.PROVISIONAL if provisional else AlertState.CONFIRMED,
+            t_first_s=t_first,
         )
+        if provisional:
+            self._provisional[event.ref] = alert
+        return alert
+
+    def cancel(self, event: AnomalyEvent) -> Alert | None:
+        """The provisional alert a cancellation ends (its emission time the cancellation's);
+        None when there is none (it was suppressed, or ``event`` is no cancellation)."""
+        if event.kind is not EventKind.CANCELLED:
+            return None
+        alert = self._provisional.pop(event.ref, None)
+        return None if alert is None else replace(alert, t_emit_s=event.t_emit_s)
+
+    def take(self, events: Iterable[AnomalyEvent]) -> AlertBatch:
+        """The alerts of a frame's events, by kind (`AlertBatch`)."""
+        confirmed: list[Alert] = []
+        provisional: list[Alert] = []
+        cancelled: list[Alert] = []
+        for e in events:
+            if e.kind is EventKind.CANCELLED:
+                c = self.cancel(e)
+                if c is not None:
+                    cancelled.append(c)
+                continue
+            a = self.build(e)
+            if a is not None:
+                (provisional if a.state is AlertState.PROVISIONAL else confirmed).append(a)
+        return AlertBatch(tuple(confirmed), tuple(provisional), tuple(cancelled))
 
     def build_all(self, events: Iterable[AnomalyEvent]) -> list[Alert]:
         """Alerts for the events that are not suppressed, in order."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from enum import IntEnum
 from operator import attrgetter
 from typing import Protocol
 
@@ -85,6 +86,14 @@ class DetectorFrame:
         return self.score > self.threshold
 
 
+class EventKind(IntEnum):
+    """What an event says about an anomaly (`AnomalyEvent.kind`)."""
+
+    CONFIRMED = 0  #: the detector's full fit: an alert, or the confirmation of a provisional one
+    PROVISIONAL = 1  #: an early look (the lead's front axle): confirmed or cancelled later
+    CANCELLED = 2  #: a provisional event that the full fit did not confirm
+
+
 @dataclass(frozen=True, slots=True)
 class AnomalyEvent:
     """One detected anomaly: the peak of s(t) after non-maximum suppression.
@@ -126,6 +135,10 @@ class AnomalyEvent:
     #: probability that the event is a real anomaly (calibrated; NaN: the detector has no
     #: calibration, the alert's heuristic applies)
     confidence: float = math.nan
+    kind: EventKind = EventKind.CONFIRMED  #: confirmed, provisional or a cancellation
+    #: the provisional event's number (1, 2, ...) that this event is, confirms or cancels;
+    #: 0: none (a confirmed event without a provisional one before it)
+    ref: int = 0
 
 
 class Detector(Protocol):

@@ -511,6 +511,61 @@ class TwoAxleConfig:
         0.5, unit="s", ge=0, le=10, help="suppression: as the windowed-std detector's"
     )
 
+    provisional: bool = param(
+        True,
+        help="send a PROVISIONAL alert as soon as the lead's front axle has met the anomaly"
+        " (the early fit below), CONFIRMED by the two-axle fit under the same id or"
+        " CANCELLED (NOT_CONFIRMED) when the rear axle does not match (docs/detector.md,"
+        " 'Provisional alerts')",
+    )
+    provisional_lag_s: float = param(
+        0.2,
+        unit="s",
+        gt=0.03,
+        le=1.0,
+        help="the early fit's window ends this long after the front axle met the anomaly's"
+        " middle: the provisional alert's latency (plus a frame). The two-axle template is"
+        " cut there: the front axle's response (-rho q, a third of the body's) and, above"
+        " 50 km/h, the start of the rear axle's",
+    )
+    provisional_threshold_z: float = param(
+        6.0,
+        unit="background std",
+        gt=0,
+        le=100,
+        help="CFAR margin of the early fit (its own running background, as threshold_z's):"
+        " chosen on the wild set's training folds for <= 1 provisional false alarm per"
+        " minute (docs/evaluation.md, E6 'Provisional alerts'); the generalization suite is"
+        " held out",
+    )
+    provisional_confidence_logit: tuple[float, float] = param(
+        (-0.5, 4.0),
+        help="(a, b): a provisional event's probability of being real, 1 / (1 + exp(-(a + b"
+        " ln(z / provisional_threshold_z)))), z its early score. Logistic fit to the"
+        " provisional alerts of the wild drives (docs/evaluation.md, E6 'Provisional"
+        " alerts')",
+    )
+    provisional_match_s: float = param(
+        0.9,
+        unit="s",
+        gt=0,
+        le=3,
+        help="a two-axle event confirms the provisional one whose crossing is within this"
+        " of its own: the early fit fires when its evidence suffices, often on the rear"
+        " axle's start, and its crossing is late by up to a body half-period (0.4 s) plus"
+        " the rear axle's lag",
+    )
+    provisional_check_s: float = param(
+        0.1,
+        unit="s",
+        ge=0,
+        le=3,
+        help="a provisional event is CANCELLED when the two-axle fit has had this long after"
+        " its hypothesis for that crossing (rear axle + post_s) and no excursion of it is"
+        " open: the rear axle did not match. One still open is waited for until its"
+        " confirmation is due (peak_window_s later)",
+    )
+
     @property
     def max_window_s(self) -> float:
         """The longest fit window (slowest lead, longest duration), s."""

@@ -62,6 +62,7 @@ from numpy.typing import NDArray
 from roadpreview.anomaly.base import (
     AnomalyEvent,
     DetectorFrame,
+    EventKind,
     LastFrame,
     TrajectorySample,
     next_time,
@@ -112,7 +113,13 @@ class TwoAxleRun:
 
     @property
     def alerts(self) -> list[AnomalyEvent]:
-        return [e for e in self.events if not e.suppressed]
+        """The confirmed events that raise (or confirm) an alert."""
+        return [e for e in self.events if not e.suppressed and e.kind is EventKind.CONFIRMED]
+
+    @property
+    def provisional(self) -> list[AnomalyEvent]:
+        """The provisional events that raise an alert."""
+        return [e for e in self.events if not e.suppressed and e.kind is EventKind.PROVISIONAL]
 
 
 #: the two-axle lag is rounded to this for the template cache, s (3 % of a 0.17 s lag at
@@ -189,6 +196,22 @@ class _Fit:
     #: amplitude's std is the innovations' std / sqrt(energy)
     energy: FloatArray = field(default_factory=lambda: np.empty((2, 0)))
     innovation: FloatArray = field(default_factory=lambda: np.full(2, np.nan))  #: newest, px
+    #: the early fit (`TwoAxleConfig.provisional`): (3, J) amplitudes, m, as ``amplitude``;
+    #: (2, J) whitened energies; (J,) unwhitened std per px; (J,) hypothesised pulse centres
+    early_amplitude: FloatArray | None = None
+    early_energy: FloatArray = field(default_factory=lambda: np.empty((2, 0)))
+    early_sigma_fit: FloatArray = field(default_factory=lambda: np.empty(0))
+    early_centre: FloatArray = field(default_factory=lambda: np.empty(0))
+
+
+@dataclass
+class _Pending:
+    """A provisional event waiting for the two-axle fit to confirm or cancel it."""
+
+    ref: int  #: its number
+    event: AnomalyEvent
+    check_t: float  #: by then the two-axle fit must have an excursion for it open, s
+    due_t: float  #: by then it must be confirmed, s
 
 
 class TwoAxleDetector(LastFrame):
@@ -215,6 +238,23 @@ class TwoAxleDetector(LastFrame):
             span_s=cfg.max_window_s + cfg.suppress_hold_s,
         )
         self._picker = self._new_picker()
+        # the early fit: its own background (its amplitudes are not the full fit's), its
+        # templates, the provisional events waiting for the two-axle fit
+        self._early_background = CfarBackground(
+            cfg.background_s,
+            cfg.background_short_s,
+            (2, len(cfg.durations_s)),
+            cfg.background_refresh_frames,
+            capacity=math.ceil(cfg.background_s * _MAX_FPS),
+        )
+        self._early_grids: dict[tuple[float, float], TemplateGrid] = {}
+        self._early_whitened: dict[
+            tuple[float, float, int, int], tuple[FloatArray, FloatArray]
+        ] = {}
+        self._pending: list[_Pending] = []
+        self._provisionals = 0  # provisional events numbered so far
+        self._last_early_t = -math.inf  # crossing of the last provisional event, s
+        self._early_stands = False  # it was not cancelled
         self._frame: DetectorFrame | None = None
         self._t_last = -math.inf
         self._last_event_t = -math.inf
@@ -259,7 +299,7 @@ class TwoAxleDetector(LastFrame):
             self._frame = DetectorFrame(
                 t, math.nan, math.nan, math.nan, math.nan, 0, suppressed, threshold=math.nan
             )
-            return self._confirm(self._picker.due(t), t)
+            return self._confirm(self._picker.due(t), t) + self._cancel_due(t)
         cfg = self.config
         learning = self._background.seconds < cfg.background_min_s
         if learning and not (
@@ -270,7 +310,7 @@ class TwoAxleDetector(LastFrame):
             self._frame = DetectorFrame(
                 t, math.nan, math.nan, math.nan, math.nan, 0, suppressed, threshold=cfg.threshold_z
             )
-            return self._confirm(self._picker.due(t), t)
+            return self._confirm(self._picker.due(t), t) + self._cancel_due(t)
         # while the road is being learnt the whitening model stands for the background
         # (its measured departure is not known yet) and the margin is wider
         threshold = cfg.threshold_z * (cfg.learning_threshold_factor if learning else 1.0)
@@ -317,14 +357,155 @@ class TwoAxleDetector(LastFrame):
         self._picker.offer(t, value, describe)
         if eligible:
             self._last_event_t = t
+        if cfg.provisional:
+            events += self._early(t, fit, suppressed, learning=learning)
+            events += self._cancel_due(t)
         return events
+
+    # -- provisional events ----------------------------------------------------------------
+    def _early(
+        self, t: float, fit: _Fit, suppressed: SuppressionReason, *, learning: bool
+    ) -> list[AnomalyEvent]:
+        """The early fit's score at this frame; a PROVISIONAL event when it is over
+        ``provisional_threshold_z`` and the floor, away from the anomalies reported."""
+        cfg = self.config
+        amp = fit.early_amplitude
+        if amp is None or learning or not fit.metric:
+            return []
+        sig = self._early_sigma(fit, amp)
+        z = np.abs(amp[:2]) / sig
+        with np.errstate(invalid="ignore"):
+            z = np.where(np.isfinite(z), z, -1.0)
+        c, j = np.unravel_index(int(np.argmax(z)), z.shape)
+        score = float(z[c, j])
+        if score < cfg.provisional_threshold_z:
+            return []
+        centre = float(fit.early_centre[j])
+        lo, hi = cfg.refractory_s
+        if (
+            -lo <= centre - self._last_cross_t <= hi
+            # the ringing of a provisional anomaly that still stands is no new one
+            or (self._early_stands and -lo <= centre - self._last_early_t <= hi)
+            or abs(centre - self._last_early_t) <= cfg.provisional_match_s
+            or self._picker_holds(centre)
+        ):
+            return []
+        a_h, a_r = float(amp[HEAVE, j]), float(amp[ROLL, j])
+        early = _Fit(
+            amplitude=amp,
+            sigma_fit=fit.early_sigma_fit,
+            t_cross=fit.early_centre,
+            valid_fraction=np.ones_like(fit.early_centre),
+            n_valid=fit.n_valid,
+            metric=True,
+        )
+        size, side, height = self._event_height(early, int(j))
+        if size < cfg.min_height_mm * 1e-3 or not (math.isfinite(a_h) or math.isfinite(a_r)):
+            return []
+        self._last_early_t = centre
+        self._early_stands = True
+        rows = self._ring.last(cfg.buffer_frames)
+        i = int(np.clip(np.searchsorted(rows[:, COL_T], centre), 0, rows.shape[0] - 1))
+        d = rows[:, COL_D]
+        known = np.flatnonzero(np.isfinite(d))
+        distance = dstd = math.nan
+        if known.size:
+            i_d = int(known[np.argmin(np.abs(known - i))])
+            distance, dstd = float(d[i_d]), float(rows[i_d, COL_DSTD])
+        speed = float(rows[i, COL_V])
+        v = cfg.vehicle
+        self._provisionals += 1
+        a, b = cfg.provisional_confidence_logit
+        x = a + b * math.log(max(score, 1e-9) / cfg.provisional_threshold_z)
+        event = AnomalyEvent(
+            t_s=centre,
+            t_peak_s=t,
+            t_emit_s=t,
+            s_px=math.nan,
+            s_left_px=math.nan,
+            s_right_px=math.nan,
+            threshold_px=math.nan,
+            side=side if math.isfinite(a_r) else Side.UNKNOWN,
+            lead_distance_m=distance,
+            lead_distance_std_m=dstd,
+            ego_speed_mps=speed if math.isfinite(speed) else None,
+            mode=FusionMode(int(rows[i, COL_MODE])),
+            valid_fraction=1.0,
+            suppressed=suppressed,
+            score=score,
+            threshold=cfg.provisional_threshold_z,
+            height_m=height,
+            height_std_m=float(sig[c, j]),
+            lead_speed_mps=self._lead_speed(rows),
+            anomaly_distance_m=distance + v.rear_overhang_m + v.wheelbase_m,
+            confidence=1.0 / (1.0 + math.exp(-min(max(x, -50.0), 50.0))),
+            kind=EventKind.PROVISIONAL,
+            ref=self._provisionals,
+        )
+        if not suppressed:
+            # the two-axle fit has tried every duration with this crossing by then
+            tau = self._tau if math.isfinite(self._tau) else 0.0
+            half = 0.5 * float(self._durations[-1])
+            check = centre + tau + half + cfg.post_s + cfg.provisional_check_s
+            self._pending.append(
+                _Pending(self._provisionals, event, check, check + cfg.peak_window_s)
+            )
+        return [event]
+
+    def _picker_holds(self, centre: float) -> bool:
+        """The two-axle fit already has an excursion open for this crossing."""
+        cand = self._picker._cand
+        return cand is not None and abs(cand[2][0].t_s - centre) <= self.config.provisional_match_s
+
+    def _early_sigma(self, fit: _Fit, amp: FloatArray) -> FloatArray:
+        """As `_sigma`, for the early fit (its own background level)."""
+        cfg = self.config
+        white = self._innovation_std[:, None] / np.sqrt(fit.early_energy)
+        sig = np.maximum(
+            white * self._early_background.level(), cfg.tracking_noise_px * fit.early_sigma_fit
+        )
+        comp = cfg.compensation_error_fraction * np.abs(amp[COMPENSATION])
+        sig[HEAVE] = np.hypot(sig[HEAVE], np.where(np.isfinite(comp), comp, 0.0))
+        leak = cfg.roll_leak_fraction * np.abs(amp[HEAVE])
+        sig[ROLL] = np.hypot(sig[ROLL], np.where(np.isfinite(leak), leak, 0.0))
+        return np.asarray(sig)
+
+    def _cancel_due(self, t: float) -> list[AnomalyEvent]:
+        """Provisional events the two-axle fit did not confirm: at their check no excursion
+        for their crossing is open, or their confirmation is overdue."""
+        out = []
+        keep = []
+        for p in self._pending:
+            if t >= p.due_t or (t >= p.check_t and not self._picker_holds(p.event.t_s)):
+                out.append(self._cancelled(p, t))
+            else:
+                keep.append(p)
+        self._pending = keep
+        return out
+
+    def _cancelled(self, p: _Pending, t: float) -> AnomalyEvent:
+        if p.event.t_s == self._last_early_t:
+            self._early_stands = False
+        return replace(p.event, t_emit_s=t, kind=EventKind.CANCELLED)
+
+    def _link(self, event: AnomalyEvent) -> AnomalyEvent:
+        """A confirmed two-axle event confirms the pending provisional one nearest its
+        crossing (within ``provisional_match_s``)."""
+        if event.suppressed or not self._pending:
+            return event
+        gaps = [abs(p.event.t_s - event.t_s) for p in self._pending]
+        k = int(np.argmin(gaps))
+        if gaps[k] > self.config.provisional_match_s:
+            return event
+        p = self._pending.pop(k)
+        return replace(event, ref=p.ref)
 
     def _confirm(
         self, confirmed: list[tuple[AnomalyEvent, _Hypothesis]], t: float
     ) -> list[AnomalyEvent]:
         """The events whose peak is confirmed now, with the height refined on the frames
         seen since (`_refine`), emitted at ``t``."""
-        return [replace(self._refine(e, h), t_emit_s=t) for e, h in confirmed]
+        return [self._link(replace(self._refine(e, h), t_emit_s=t)) for e, h in confirmed]
 
     def _row(self, sample: TrajectorySample) -> FloatArray:
         ok = sample.valid
@@ -431,7 +612,7 @@ class TwoAxleDetector(LastFrame):
             if c < 2:
                 energy[c] = ss
                 innovation[c] = xw[-1]
-        return _Fit(
+        result = _Fit(
             amplitude=amp / scale,
             sigma_fit=1.0 / (np.sqrt(grid.ss_raw) * abs(scale)),
             t_cross=t - lag,
@@ -441,6 +622,45 @@ class TwoAxleDetector(LastFrame):
             energy=energy * scale * scale,
             innovation=innovation,
         )
+        if cfg.provisional and metric:
+            self._fit_early(result, x, t, tau, dt, scale)
+        return result
+
+    def _fit_early(
+        self, fit: _Fit, x: FloatArray, t: float, tau: float, dt: float, scale: float
+    ) -> None:
+        """The early fit into ``fit``: every duration's two-axle template cut
+        ``provisional_lag_s`` after the front axle met the anomaly's middle, fitted to the
+        end of the same whitened channels (the same filters, a shorter window)."""
+        cfg = self.config
+        lag = 0.5 * self._durations + cfg.provisional_lag_s
+        key = (tau, dt)
+        grid = self._early_grids.get(key)
+        if grid is None:
+            grid = template_grid(self.bank, cfg, tau, dt, lag)
+            if len(self._early_grids) >= _MAX_GRIDS:
+                self._early_grids.pop(next(iter(self._early_grids)))
+            self._early_grids[key] = grid
+        n = grid.s.shape[1]
+        if x.shape[0] < n:
+            return
+        xe = x[-n:]
+        j_n = len(lag)
+        amp = np.full((3, j_n), np.nan)
+        energy = np.full((2, j_n), np.nan)
+        heave, roll = self._whiteners
+        for c, w in enumerate((heave, roll, heave)):
+            xc = xe[:, c]
+            if not np.isfinite(xc).all():
+                continue
+            s_r, ss = self._whitened(grid, w, self._early_whitened)
+            amp[c] = (s_r @ w.apply(xc)) / ss
+            if c < 2:
+                energy[c] = ss
+        fit.early_amplitude = amp / scale
+        fit.early_energy = energy * scale * scale
+        fit.early_sigma_fit = 1.0 / (np.sqrt(grid.ss_raw) * abs(scale))
+        fit.early_centre = t - cfg.provisional_lag_s + 0.0 * lag
 
     def _on_grid(self, rows: FloatArray, t: float, dt: float, n: int) -> FloatArray | None:
         """The channels on the regular grid of ``n`` frames ending at ``t``
@@ -471,16 +691,22 @@ class TwoAxleDetector(LastFrame):
             self._grids[key] = grid
         return grid
 
-    def _whitened(self, grid: TemplateGrid, whitener: Whitener) -> tuple[FloatArray, FloatArray]:
+    def _whitened(
+        self,
+        grid: TemplateGrid,
+        whitener: Whitener,
+        cache: dict[tuple[float, float, int, int], tuple[FloatArray, FloatArray]] | None = None,
+    ) -> tuple[FloatArray, FloatArray]:
         """The grid's templates through ``whitener`` (`whiten_templates`), cached per filter
-        version."""
+        version (in ``cache``, default the two-axle fit's)."""
+        store = self._whitened_cache if cache is None else cache
         key = (*grid.key, whitener.channel, whitener.version)
-        hit = self._whitened_cache.get(key)
+        hit = store.get(key)
         if hit is None:
             hit = whiten_templates(grid, whitener)
-            if len(self._whitened_cache) >= 4 * _MAX_GRIDS:
-                self._whitened_cache.clear()
-            self._whitened_cache[key] = hit
+            if len(store) >= 4 * _MAX_GRIDS:
+                store.clear()
+            store[key] = hit
         return hit
 
     def _sigma(self, fit: _Fit, *, learning: bool = False) -> FloatArray:
@@ -520,6 +746,9 @@ class TwoAxleDetector(LastFrame):
         if math.isfinite(self._innovation_std[HEAVE]):
             # the amplitudes in units of their white-noise std: independent of the filter
             self._background.push(t, amp * np.sqrt(fit.energy) / self._innovation_std[:, None])
+            if fit.early_amplitude is not None:
+                early = np.abs(fit.early_amplitude[:2]) * np.sqrt(fit.early_energy)
+                self._early_background.push(t, early / self._innovation_std[:, None])
         elif self._ar_n >= 2:
             self._refresh_filters()
         if self._background.pushes % self._background.refresh == 0:
@@ -741,13 +970,18 @@ class TwoAxleDetector(LastFrame):
         events = self.flush()
         self._ring.clear()
         self._picker = self._new_picker()
+        self._last_early_t = -math.inf
         self._range_rate = math.nan
         self._dt = math.nan
         return events
 
     def flush(self) -> list[AnomalyEvent]:
-        """End of stream: the pending event, confirmed at the last frame's time."""
-        return self._confirm(self._picker.flush(), self._t_last)
+        """End of stream (or a new target): the pending event, confirmed at the last frame's
+        time, and the provisional events it did not confirm, cancelled."""
+        events = self._confirm(self._picker.flush(), self._t_last)
+        events += [self._cancelled(p, self._t_last) for p in self._pending]
+        self._pending = []
+        return events
 
     def run(self, samples: Iterable[TrajectorySample]) -> TwoAxleRun:
         """Push every sample, flush, and return per-frame arrays and all events."""

@@ -374,7 +374,14 @@ def replay(
         if start_s is not None or end_s is not None:  # the events of the window only
             duration = summary.last_t - summary.first_t
             events = [e for e in events if _in_window(e, start, summary)]
-        match = match_alerts(summary.alerts, events, t0=start, duration_s=duration)
+        match = match_alerts(
+            summary.alerts,
+            events,
+            t0=start,
+            duration_s=duration,
+            provisional=summary.provisional,
+            cancelled=summary.cancelled,
+        )
     result = ReplayResult(
         run=summary,
         video_start_s=start,
@@ -481,12 +488,18 @@ def input_files(inputs: ReplayInputs, sources: Sequence[Source]) -> list[Path]:
 
 
 def format_alerts(
-    alerts: Sequence[Alert], confirmations: Sequence[ConfirmationResult], t0: float
+    alerts: Sequence[Alert],
+    confirmations: Sequence[ConfirmationResult],
+    t0: float,
+    cancelled: Sequence[Alert] = (),
 ) -> str:
-    """The alerts as a table (times from ``t0``), with the ego's confirmation of each."""
+    """The alerts as a table (times from ``t0``), with when each was first sent (its
+    provisional alert, if any) and confirmed, and the ego's confirmation of each; then the
+    provisional alerts that were cancelled."""
     felt = {c.alert_id: c for c in confirmations}
     lines = [
-        "   id  crossing  distance  arrives in   height            side   confidence  ego felt"
+        "   id  crossing  first sent  confirmed  distance  arrives in   height            side"
+        "   confidence  ego felt"
     ]
     for a in alerts:
         c = felt.get(a.alert_id)
@@ -499,10 +512,16 @@ def format_alerts(
         if c is not None and math.isfinite(c.peak_mps2):
             outcome += f" ({c.peak_mps2:.1f} m/s²)"
         lines.append(
-            f"{a.alert_id:5d}  {a.t_s - t0:7.2f} s  {dist}  {tta}    {height:16s}  "
+            f"{a.alert_id:5d}  {a.t_s - t0:7.2f} s  {a.t_first_sent_s - t0:8.2f} s"
+            f"  {a.t_emit_s - t0:7.2f} s  {dist}  {tta}    {height:16s}  "
             f"{a.side.name:5s}  {100 * a.confidence:8.0f} %  {outcome}"
         )
-    return "\n".join(lines) if alerts else "   (none)"
+    for a in cancelled:
+        lines.append(
+            f"{a.alert_id:5d}  {a.t_s - t0:7.2f} s  provisional, cancelled at"
+            f" {a.t_emit_s - t0:.2f} s (the rear axle did not match)"
+        )
+    return "\n".join(lines) if alerts or cancelled else "   (none)"
 
 
 def format_modes(modes: Sequence[tuple[float, FusionMode, str]], start: float) -> str:

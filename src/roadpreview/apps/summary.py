@@ -130,6 +130,9 @@ def truth_rows(match: MatchReport) -> list[dict[str, Any]]:
                 "tta_true_s": _num(r.tta_true_s),
                 "tta_error_s": _num(r.tta_error_s),
                 "lead_time_s": _num(r.lead_time_s),
+                "latency_first_s": _num(r.latency_s),
+                "latency_confirmed_s": _num(r.latency_confirmed_s),
+                "headway_s": _num(r.headway_s),
             }
         )
     return rows
@@ -155,6 +158,8 @@ def summary_dict(
         "seconds": round(s.seconds, 3),
         "fps": _num(s.fps, 2),
         "alerts": len(s.alerts),
+        "provisional_alerts": len(s.provisional),
+        "provisional_cancelled": len(s.cancelled),
         "video_decode_failures": result.decode_failures,
         "can_input_errors": result.input_errors,
         "frames_out_of_order": s.frames_out_of_order,
@@ -190,6 +195,16 @@ def summary_dict(
             "events": truth_rows(match),
             "false_alarm_alert_ids": [a.alert_id for a in match.false_alarms],
         }
+        p = match.provisional
+        if p is not None:
+            summary["truth"]["provisional"] = {
+                "alerts": p.alerts,
+                "confirmed": p.confirmed,
+                "hits": p.hits,
+                "false_alarms": p.false_alarms,
+                "false_alarms_per_min": _num(p.false_alarms_per_min),
+                "cancelled_in_time": p.cancelled_in_time,
+            }
     return summary
 
 

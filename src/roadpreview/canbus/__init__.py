@@ -1,11 +1,14 @@
 """CAN: the project's DBC and E2E protection, input decoding for any car, outputs, logs, live bus.
 
 * `dbc`: ``roadpreview.dbc`` (inputs; outputs ``RP_ALERT``, ``RP_ALERT_DETAIL``,
-  ``RP_ALERT_END``, ``RP_STATUS``, ``RP_ROAD_STATUS``, ``RP_CONFIRM``), AUTOSAR E2E P01.
+  ``RP_ALERT_END``, ``RP_STATUS``, ``RP_ROAD_STATUS``, ``RP_CONFIRM``, ``RP_INPUT_STATUS``,
+  ``RP_PREVIEW``), AUTOSAR E2E P01.
 * `mapping` + `decode`: any car's DBC + a mapping file -> `ImuSample` / `SpeedSample`.
 * `imu_csv`: phone-style IMU CSV files; `samples.ImuMount`: a calibrated IMU mount.
-* `output`: `Alert` / `ConfirmationResult` / `Status` -> E2E-protected frames;
-  `received`: those frames back, as a receiver sees them (`OutputDecoder`).
+* `output`: `Alert` / `ConfirmationResult` / `Status` / `RoadPreview` -> E2E-protected
+  frames; `received`: those frames back, as a receiver sees them (`OutputDecoder`);
+  `receiver`: reference receivers, each alert's state (`AlertReceiver`) and the road
+  preview put together again (`PreviewAssembler`).
 * `repetition`: each alert repeated with its distance and time to arrival as of the send
   until the ego has passed the spot, then ``RP_ALERT_END`` (passed / cancelled).
 * `logio`: CAN log files in every format python-can reads (BLF, ASC, candump, TRC, CSV,
@@ -24,6 +27,9 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # the real names for type checkers; at run time they load lazily
+    from roadpreview.canbus.dbc import (
+        DBC_VERSION as DBC_VERSION,
+    )
     from roadpreview.canbus.dbc import (
         E2E_COUNTER_MODULUS as E2E_COUNTER_MODULUS,
     )
@@ -50,6 +56,9 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
     )
     from roadpreview.canbus.dbc import (
         RP_INPUT_STATUS as RP_INPUT_STATUS,
+    )
+    from roadpreview.canbus.dbc import (
+        RP_PREVIEW as RP_PREVIEW,
     )
     from roadpreview.canbus.dbc import (
         RP_ROAD_STATUS as RP_ROAD_STATUS,
@@ -160,6 +169,9 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
         OutputEncoders as OutputEncoders,
     )
     from roadpreview.canbus.output import (
+        PreviewEncoder as PreviewEncoder,
+    )
+    from roadpreview.canbus.output import (
         RoadStatusEncoder as RoadStatusEncoder,
     )
     from roadpreview.canbus.output import (
@@ -178,8 +190,15 @@ if TYPE_CHECKING:  # the real names for type checkers; at run time they load laz
     from roadpreview.canbus.received import ReceivedConfirm as ReceivedConfirm
     from roadpreview.canbus.received import ReceivedInputStatus as ReceivedInputStatus
     from roadpreview.canbus.received import ReceivedOutput as ReceivedOutput
+    from roadpreview.canbus.received import ReceivedPreviewHeader as ReceivedPreviewHeader
+    from roadpreview.canbus.received import ReceivedPreviewPage as ReceivedPreviewPage
     from roadpreview.canbus.received import ReceivedRoadStatus as ReceivedRoadStatus
     from roadpreview.canbus.received import ReceivedStatus as ReceivedStatus
+    from roadpreview.canbus.receiver import AlertReceiver as AlertReceiver
+    from roadpreview.canbus.receiver import AlertTransition as AlertTransition
+    from roadpreview.canbus.receiver import PreviewAssembler as PreviewAssembler
+    from roadpreview.canbus.receiver import ReceivedAlertLife as ReceivedAlertLife
+    from roadpreview.canbus.receiver import ReceiverState as ReceiverState
     from roadpreview.canbus.repetition import (
         AlertEnd as AlertEnd,
     )
@@ -208,14 +227,17 @@ _EXPORTS = {
     "AlertEncoder": "roadpreview.canbus.output",
     "AlertEnd": "roadpreview.canbus.repetition",
     "AlertEndEncoder": "roadpreview.canbus.output",
+    "AlertReceiver": "roadpreview.canbus.receiver",
     "AlertRepeater": "roadpreview.canbus.repetition",
     "AlertSend": "roadpreview.canbus.repetition",
+    "AlertTransition": "roadpreview.canbus.receiver",
     "BoundedQueueListener": "roadpreview.canbus.live",
     "CanInputDecoder": "roadpreview.canbus.decode",
     "CanLogPlayer": "roadpreview.canbus.live",
     "CanLogReader": "roadpreview.canbus.logio",
     "CanReceiver": "roadpreview.canbus.live",
     "ConfirmEncoder": "roadpreview.canbus.output",
+    "DBC_VERSION": "roadpreview.canbus.dbc",
     "DETECTOR_CODES": "roadpreview.canbus.output",
     "DecodeStats": "roadpreview.canbus.decode",
     "E2E_COUNTER_MODULUS": "roadpreview.canbus.dbc",
@@ -230,6 +252,8 @@ _EXPORTS = {
     "LogProblem": "roadpreview.canbus.logio",
     "OutputDecoder": "roadpreview.canbus.received",
     "OutputEncoders": "roadpreview.canbus.output",
+    "PreviewAssembler": "roadpreview.canbus.receiver",
+    "PreviewEncoder": "roadpreview.canbus.output",
     "QUANTITIES": "roadpreview.canbus.mapping",
     "RESERVED_OUTPUT_IDS": "roadpreview.canbus.dbc",
     "RP_ALERT": "roadpreview.canbus.dbc",
@@ -237,14 +261,19 @@ _EXPORTS = {
     "RP_ALERT_END": "roadpreview.canbus.dbc",
     "RP_CONFIRM": "roadpreview.canbus.dbc",
     "RP_INPUT_STATUS": "roadpreview.canbus.dbc",
+    "RP_PREVIEW": "roadpreview.canbus.dbc",
     "RP_ROAD_STATUS": "roadpreview.canbus.dbc",
     "RP_STATUS": "roadpreview.canbus.dbc",
     "ReceivedAlert": "roadpreview.canbus.received",
     "ReceivedAlertDetail": "roadpreview.canbus.received",
     "ReceivedAlertEnd": "roadpreview.canbus.received",
+    "ReceivedAlertLife": "roadpreview.canbus.receiver",
     "ReceivedConfirm": "roadpreview.canbus.received",
     "ReceivedOutput": "roadpreview.canbus.received",
     "ReceivedInputStatus": "roadpreview.canbus.received",
+    "ReceivedPreviewHeader": "roadpreview.canbus.received",
+    "ReceivedPreviewPage": "roadpreview.canbus.received",
+    "ReceiverState": "roadpreview.canbus.receiver",
     "ReceivedRoadStatus": "roadpreview.canbus.received",
     "ReceivedStatus": "roadpreview.canbus.received",
     "RepetitionConfig": "roadpreview.canbus.repetition",

@@ -6,9 +6,11 @@ cantools in strict mode. Every input message carries an AUTOSAR E2E profile 1
 header: byte 0 is a CRC-8 SAE J1850 over the message's E2E data ID (DBC
 attribute ``E2E_DataID``) and bytes 1..7, bits 8..11 an alive counter that
 runs 0..14; so do the outputs ``RP_ALERT``, ``RP_ALERT_DETAIL``, ``RP_ALERT_END``,
-``RP_CONFIRM``, ``RP_STATUS``, ``RP_ROAD_STATUS`` and ``RP_INPUT_STATUS``
-(`roadpreview.canbus.output`). The CRC comes from the ``autosar-e2e`` package.
-Messages and signals are documented in ``docs/can-interface.md``.
+``RP_CONFIRM``, ``RP_STATUS``, ``RP_ROAD_STATUS``, ``RP_INPUT_STATUS`` and the multiplexed
+``RP_PREVIEW`` (`roadpreview.canbus.output`). The CRC comes from the ``autosar-e2e`` package.
+Messages and signals are documented in ``docs/can-interface.md``. The DBC's ``VERSION`` is
+`DBC_VERSION`; version 2 only added signals in free bits and a message, so a receiver built
+on version 1 keeps working.
 
 Other cars' DBCs (opendbc) load with ``load_database(path, strict=False)``:
 they often have overlapping or placeholder signals that strict mode refuses.
@@ -45,9 +47,13 @@ RP_INPUT_STATUS = "RP_INPUT_STATUS"
 RP_ALERT_DETAIL = "RP_ALERT_DETAIL"
 RP_CONFIRM = "RP_CONFIRM"
 RP_ALERT_END = "RP_ALERT_END"
+RP_PREVIEW = "RP_PREVIEW"
+
+#: ``VERSION`` of the shipped DBC (2: issue 27, ``AlertState``, ``EndCauseEx``, ``RP_PREVIEW``)
+DBC_VERSION = "roadpreview 2"
 
 #: 11-bit identifiers reserved for roadpreview's own output messages (alerts, confirmations,
-#: status)
+#: status, road preview)
 RESERVED_OUTPUT_IDS = range(0x200, 0x210)
 
 #: DBC message attribute holding the AUTOSAR E2E data ID

@@ -1,16 +1,18 @@
 """roadpreview's output messages: per active alert and period ``RP_ALERT`` +
-``RP_ALERT_DETAIL``, at its end ``RP_ALERT_END``, per checked alert ``RP_CONFIRM``, and
-every 100 ms ``RP_STATUS`` + ``RP_ROAD_STATUS``.
+``RP_ALERT_DETAIL``, at its end ``RP_ALERT_END``, per checked alert ``RP_CONFIRM``,
+every 100 ms ``RP_STATUS`` + ``RP_ROAD_STATUS``, and per road preview the pages of
+``RP_PREVIEW`` (`PreviewEncoder`).
 
 `AlertEncoder`, `AlertDetailEncoder`, `AlertEndEncoder`, `ConfirmEncoder`,
-`StatusEncoder` and `RoadStatusEncoder` turn an `AlertSend` (an alert as of one send,
-`roadpreview.canbus.repetition`) / an `AlertEnd` / a `ConfirmationResult` / a `Status`
-into a ``can.Message`` through cantools (physical values in, the DBC does
-the bits), with an AUTOSAR E2E profile 1 header: an alive counter per
+`StatusEncoder`, `RoadStatusEncoder` and `PreviewEncoder` turn an `AlertSend` (an alert as
+of one send, `roadpreview.canbus.repetition`) / an `AlertEnd` / a `ConfirmationResult` / a
+`Status` / a `RoadPreview` into ``can.Message``s through cantools (physical values in,
+the DBC does the bits), with an AUTOSAR E2E profile 1 header: an alive counter per
 message (0..14, +1 per frame) and the CRC from ``autosar-e2e``. Values
 outside a signal's range saturate at its limits (the DBC comments say so);
-unknown values go out as ``SignalNotAvailable``. The receiving side, `OutputDecoder`, is
-`roadpreview.canbus.received`.
+unknown values go out as ``SignalNotAvailable``. The receiving side is
+`roadpreview.canbus.received` (`OutputDecoder`, frame by frame) and
+`roadpreview.canbus.receiver` (`AlertReceiver`, `PreviewAssembler`).
 """
 
 from __future__ import annotations
@@ -21,8 +23,10 @@ from collections import Counter
 from collections.abc import Iterable, Iterator, Mapping
 
 import can
+import numpy as np
 from cantools.database.can import Database
 from cantools.database.can import Message as MessageDef
+from numpy.typing import NDArray
 
 from roadpreview.canbus.dbc import (
     E2E_COUNTER_MODULUS,
@@ -31,18 +35,20 @@ from roadpreview.canbus.dbc import (
     RP_ALERT_END,
     RP_CONFIRM,
     RP_INPUT_STATUS,
+    RP_PREVIEW,
     RP_ROAD_STATUS,
     RP_STATUS,
     e2e_layout,
     encode_protected,
     load_database,
 )
-from roadpreview.canbus.repetition import AlertEnd, AlertSend
+from roadpreview.canbus.repetition import AlertEnd, AlertSend, EndCause
 from roadpreview.errors import ConfigError, InputDataError
 from roadpreview.types import (
     ISO8608_CLASSES,
     Alert,
     ConfirmationResult,
+    RoadPreview,
     RoadState,
     Status,
 )
@@ -56,6 +62,25 @@ _KMH = 1.0 / 3.6  #: m/s per km/h
 DETECTOR_CODES = {"std": 0, "two-axle": 1}
 #: reference of the G_d(n0) levels on CAN: 10 log10(G_d(n0) / 1e-6 m³)
 GD_REF_M3 = 1e-6
+#: the largest cause the 2-bit ``RP_ALERT_END.EndCause`` carries (version 1); a larger one
+#: goes out as NONE there and in full in ``EndCauseEx``
+END_CAUSE_V1_MAX = EndCause.OVERFLOW
+
+# RP_PREVIEW (docs/can-interface.md): page 0 the header, pages 1.. four bins each
+#: bins per ``RP_PREVIEW`` page (``PreviewHeight0..3`` / ``PreviewStd0..3``)
+PREVIEW_BINS_PER_PAGE = 4
+#: most bins per track in one snapshot (``PreviewBins`` maximum): 60 m at 0.5 m, so that two
+#: tracks fit the 6-bit ``PreviewPage`` (1 + 2 x 30 = 61 pages)
+PREVIEW_MAX_BINS = 120
+#: ``PreviewCycle`` runs 0..3, +1 per snapshot
+PREVIEW_CYCLE_MODULUS = 4
+#: ``PreviewHeight*`` step and its raw range; raw -128 is "no valid estimate"
+PREVIEW_HEIGHT_LSB_MM = 2.0
+PREVIEW_HEIGHT_RAW_MAX = 127
+#: ``PreviewStd*`` step and its raw maximum (7: at least 28 mm; also sent for a bin without
+#: an estimate)
+PREVIEW_STD_LSB_MM = 4.0
+PREVIEW_STD_RAW_MAX = 7
 
 
 class _ProtectedEncoder:
@@ -145,6 +170,7 @@ class AlertDetailEncoder(_ProtectedEncoder):
         alert = send.alert
         return {
             "DetailDetector": detector_code(detector),
+            "AlertState": int(alert.state),
             "AlertId": send.can_id % 256,
             "AlertHeightStd": self._fit("AlertHeightStd", alert.height_std_mm),
             "AlertScore": self._fit("AlertScore", alert.severity_px),
@@ -175,10 +201,13 @@ class AlertEndEncoder(_ProtectedEncoder):
         super().__init__(RP_ALERT_END, db, channel)
 
     def values(self, end: AlertEnd) -> dict[str, float | int | str]:
-        """The physical signal values (before E2E) of ``end``."""
+        """The physical signal values (before E2E) of ``end``: the full cause in
+        ``EndCauseEx``, and in the version-1 ``EndCause`` when it fits (else NONE)."""
+        cause = int(end.cause)
         return {
             "EndReason": int(end.reason),
-            "EndCause": int(end.cause),
+            "EndCause": cause if cause <= END_CAUSE_V1_MAX else int(EndCause.NONE),
+            "EndCauseEx": cause,
             "EndAlertId": end.can_id % 256,
             "EndAlertSends": min(max(end.sends, 0), 255),
             "EndDistance": self._fit("EndDistance", end.distance_m),
@@ -352,12 +381,120 @@ class InputStatusEncoder(_ProtectedEncoder):
         return frame
 
 
+class PreviewEncoder(_ProtectedEncoder):
+    """`RoadPreview` -> the ``RP_PREVIEW`` frames of one snapshot: the header (page 0), then
+    the bin pages, four bins a page, the left (or only) track's pages first.
+
+    Heights go out in steps of 2 mm (raw -128: no estimate), standard deviations in steps
+    of 4 mm up to 28 mm (meaning at least that); both saturate (``saturated``). A track
+    longer than ``max_bins`` (at most `PREVIEW_MAX_BINS`) loses its far bins
+    (``truncated`` counts the snapshots cut). Every snapshot has the next ``PreviewCycle``
+    (0..3); every frame the next E2E alive counter. The receiving side is
+    `roadpreview.canbus.receiver.PreviewAssembler`.
+    """
+
+    def __init__(
+        self,
+        db: Database | None = None,
+        *,
+        channel: int | str | None = None,
+        max_bins: int = PREVIEW_MAX_BINS,
+    ) -> None:
+        super().__init__(RP_PREVIEW, db, channel)
+        if not 0 <= max_bins <= PREVIEW_MAX_BINS:
+            raise ConfigError(f"PreviewEncoder max_bins = {max_bins}: 0..{PREVIEW_MAX_BINS}")
+        self.max_bins = max_bins
+        self.cycle = 0  #: ``PreviewCycle`` of the next snapshot (0..3)
+        self.truncated = 0  #: snapshots with more than ``max_bins`` bins per track
+
+    def _check(self, preview: RoadPreview) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        height = np.asarray(preview.height_m, dtype=np.float64)
+        std = np.asarray(preview.std_m, dtype=np.float64)
+        tracks = 2 if preview.sides else 1
+        if height.ndim != 2 or height.shape[0] != tracks or std.shape != height.shape:
+            raise InputDataError(
+                f"RoadPreview.height_m {height.shape} / std_m {std.shape}: both must be"
+                f" ({tracks}, bins) for sides={preview.sides}"
+            )
+        if not (math.isfinite(preview.bin_m) and preview.bin_m > 0):
+            raise InputDataError(f"RoadPreview.bin_m = {preview.bin_m}: must be > 0")
+        return height, std
+
+    def header_values(
+        self, preview: RoadPreview, *, timestamp: float | None = None
+    ) -> dict[str, float | int | str]:
+        """The physical signal values (before E2E) of the header page (page 0), without
+        ``PreviewCycle``; ``timestamp``: the frame's time (default the preview's)."""
+        height, _ = self._check(preview)
+        ts = preview.t_s if timestamp is None else timestamp
+        return {
+            "PreviewPage": 0,
+            "PreviewBins": min(height.shape[1], self.max_bins),
+            "PreviewSides": int(preview.sides),
+            "PreviewBinLength": self._fit("PreviewBinLength", preview.bin_m),
+            "PreviewStart": self._fit("PreviewStart", preview.start_m),
+            "PreviewLeadRearAxle": self._fit("PreviewLeadRearAxle", preview.lead_rear_axle_m),
+            "PreviewAge": self._fit("PreviewAge", ts - preview.t_s),
+        }
+
+    def page_values(self, preview: RoadPreview) -> list[dict[str, float | int | str]]:
+        """The physical signal values (before E2E) of the bin pages 1.., in order, without
+        ``PreviewCycle``."""
+        height, std = self._check(preview)
+        n = min(height.shape[1], self.max_bins)
+        slots = -(-n // PREVIEW_BINS_PER_PAGE) * PREVIEW_BINS_PER_PAGE  # per track
+        h = np.full((height.shape[0], slots), np.nan)
+        sd = np.full_like(h, np.nan)
+        h[:, :n] = height[:, :n] * 1e3
+        sd[:, :n] = std[:, :n] * 1e3
+        valid = np.isfinite(h) & np.isfinite(sd)
+        h_raw = np.rint(np.where(valid, h, 0.0) / PREVIEW_HEIGHT_LSB_MM)
+        sd_raw = np.rint(np.where(valid, sd, math.inf) / PREVIEW_STD_LSB_MM)
+        self.saturated["PreviewHeight"] += int(
+            np.count_nonzero(valid & (np.abs(h_raw) > PREVIEW_HEIGHT_RAW_MAX))
+        )
+        self.saturated["PreviewStd"] += int(
+            np.count_nonzero(valid & ((sd_raw > PREVIEW_STD_RAW_MAX) | (sd_raw < 0)))
+        )
+        lim = PREVIEW_HEIGHT_RAW_MAX
+        h_mm = np.clip(h_raw, -lim, lim) * PREVIEW_HEIGHT_LSB_MM
+        sd_mm = np.clip(sd_raw, 0, PREVIEW_STD_RAW_MAX) * PREVIEW_STD_LSB_MM
+        pages: list[dict[str, float | int | str]] = []
+        for row in range(0, valid.size, PREVIEW_BINS_PER_PAGE):  # one page per 4 slots
+            page: dict[str, float | int | str] = {"PreviewPage": len(pages) + 1}
+            for i, k in enumerate(range(row, row + PREVIEW_BINS_PER_PAGE)):
+                ok = bool(valid.flat[k])
+                page[f"PreviewHeight{i}"] = float(h_mm.flat[k]) if ok else SIGNAL_NOT_AVAILABLE
+                page[f"PreviewStd{i}"] = float(sd_mm.flat[k])
+            pages.append(page)
+        return pages
+
+    def encode(self, preview: RoadPreview, *, timestamp: float | None = None) -> list[can.Message]:
+        """The frames of one snapshot, header first (time stamp: ``timestamp``, default the
+        preview's time; ``PreviewAge`` is the difference)."""
+        ts = float(preview.t_s if timestamp is None else timestamp)
+        header = self.header_values(preview, timestamp=ts)
+        pages = self.page_values(preview)
+        if preview.height_m.shape[1] > self.max_bins:
+            self.truncated += 1
+            log.debug("RP_PREVIEW: %d bins cut to %d", preview.height_m.shape[1], self.max_bins)
+        cycle = self.cycle
+        self.cycle = (self.cycle + 1) % PREVIEW_CYCLE_MODULUS
+        return [self._frame({**v, "PreviewCycle": cycle}, ts) for v in (header, *pages)]
+
+
+def preview_page_count(bins: int, sides: bool) -> int:
+    """``RP_PREVIEW`` frames of one snapshot with ``bins`` bins per track, the header
+    included: 1 + ceil(bins / 4) per track."""
+    return 1 + (2 if sides else 1) * -(-bins // PREVIEW_BINS_PER_PAGE)
+
+
 class OutputEncoders:
     """roadpreview's output messages, encoded from one database for one detector: what a
     run sends per alert and period (RP_ALERT, then RP_ALERT_DETAIL), at an alert's end
-    (RP_ALERT_END), per confirmation (RP_CONFIRM) and periodically (RP_STATUS,
-    RP_ROAD_STATUS). Shared by the live sender and the replay's log so that both send the
-    same frames in the same order."""
+    (RP_ALERT_END), per confirmation (RP_CONFIRM), periodically (RP_STATUS,
+    RP_ROAD_STATUS) and per road preview (RP_PREVIEW). Shared by the live sender and the
+    replay's log so that both send the same frames in the same order."""
 
     def __init__(self, db: Database | None = None, *, detector: str = "two-axle") -> None:
         detector_code(detector)  # an unknown name fails here, not at the first alert
@@ -369,6 +506,7 @@ class OutputEncoders:
         self.status = StatusEncoder(self.alert.db)
         self.road = RoadStatusEncoder(self.alert.db)
         self.input = InputStatusEncoder(self.alert.db)
+        self.preview = PreviewEncoder(self.alert.db)
 
     def alert_frames(
         self, send: AlertSend | Alert, *, timestamp: float | None = None
@@ -378,6 +516,12 @@ class OutputEncoders:
             self.alert.encode(send, timestamp=timestamp),
             self.detail.encode(send, self.detector, timestamp=timestamp),
         ]
+
+    def preview_frames(
+        self, preview: RoadPreview, *, timestamp: float | None = None
+    ) -> list[can.Message]:
+        """One road-preview snapshot: its ``RP_PREVIEW`` pages, header first."""
+        return self.preview.encode(preview, timestamp=timestamp)
 
     def status_frames(self, status: Status, *, timestamp: float = 0.0) -> list[can.Message]:
         """The periodic frames: ``RP_STATUS``, ``RP_ROAD_STATUS``, then ``RP_INPUT_STATUS``

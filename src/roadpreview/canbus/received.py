@@ -1,8 +1,14 @@
 """roadpreview's output frames as a receiver sees them (the chassis ECU, a test, a monitor):
 `OutputDecoder` checks each frame's E2E CRC and alive counter per message and gives
 `ReceivedAlert`, `ReceivedAlertDetail`, `ReceivedAlertEnd`, `ReceivedConfirm`,
-`ReceivedStatus`, `ReceivedRoadStatus` and `ReceivedInputStatus` in SI units, None for
-"not available". The sending side is `roadpreview.canbus.output`.
+`ReceivedStatus`, `ReceivedRoadStatus`, `ReceivedInputStatus`, and per ``RP_PREVIEW`` page
+`ReceivedPreviewHeader` / `ReceivedPreviewPage`, in SI units, None (NaN in the preview's
+bins) for "not available". The sending side is `roadpreview.canbus.output`; what follows
+an alert's life and puts the preview pages together is `roadpreview.canbus.receiver`.
+
+A decoder built on a DBC of version 1 (no ``AlertState``, ``EndCauseEx``, ``RP_PREVIEW``)
+decodes the frames of version 2 as version 1 did: every alert CONFIRMED, the cause of an
+end as ``EndCause`` says (NONE for NOT_CONFIRMED), no preview.
 """
 
 from __future__ import annotations
@@ -15,6 +21,7 @@ import can
 import e2e.p01
 from cantools.database.can import Database
 from cantools.database.can import Message as MessageDef
+from cantools.database.errors import DecodeError
 from cantools.database.namedsignalvalue import NamedSignalValue
 
 from roadpreview.canbus.dbc import (
@@ -24,15 +31,28 @@ from roadpreview.canbus.dbc import (
     RP_ALERT_END,
     RP_CONFIRM,
     RP_INPUT_STATUS,
+    RP_PREVIEW,
     RP_ROAD_STATUS,
     RP_STATUS,
     e2e_layout,
     load_database,
 )
 from roadpreview.canbus.decode import signal_values
-from roadpreview.canbus.output import DETECTOR_CODES, GD_REF_M3, INPUT_STATUS_GROUPS
+from roadpreview.canbus.output import (
+    DETECTOR_CODES,
+    GD_REF_M3,
+    INPUT_STATUS_GROUPS,
+    PREVIEW_BINS_PER_PAGE,
+)
 from roadpreview.canbus.repetition import EndCause, EndReason
-from roadpreview.types import ISO8608_CLASSES, Confirmation, FusionMode, Side, SuppressionReason
+from roadpreview.types import (
+    ISO8608_CLASSES,
+    AlertState,
+    Confirmation,
+    FusionMode,
+    Side,
+    SuppressionReason,
+)
 
 _DEG = math.pi / 180.0
 _KMH = 1.0 / 3.6  #: m/s per km/h
@@ -72,6 +92,8 @@ class ReceivedAlertDetail:
     score: float | None  #: the detector's score (std: px; two-axle: background stds)
     lead_speed_mps: float | None
     crossing_age_s: float | None  #: since the lead crossed the anomaly
+    #: PROVISIONAL or CONFIRMED (``AlertState``; a version-1 DBC or sender: CONFIRMED)
+    state: AlertState = AlertState.CONFIRMED
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,6 +104,8 @@ class ReceivedAlertEnd:
     counter: int
     alert_id: int  #: the alert that ended (8-bit id)
     reason: EndReason
+    #: the full cause: ``EndCauseEx`` when it is not NONE, else ``EndCause`` (a version-1
+    #: sender or DBC); NOT_CONFIRMED only from ``EndCauseEx``
     cause: EndCause
     sends: int  #: RP_ALERT frames sent for the alert (saturates at 255)
     distance_m: float | None  #: the front axle to the anomaly then (negative: passed)
@@ -149,6 +173,45 @@ class ReceivedInputStatus:
     counts: dict[str, int]  #: signal (`INPUT_STATUS_GROUPS`) -> count, saturating at 255
 
 
+@dataclass(frozen=True, slots=True)
+class ReceivedPreviewHeader:
+    """The header page (0) of one ``RP_PREVIEW`` snapshot (SI units; NaN: not available)."""
+
+    t_rx_s: float
+    counter: int
+    cycle: int  #: ``PreviewCycle``: the same on every page of the snapshot, 0..3
+    bins: int  #: bins per track
+    sides: bool  #: two tracks (left, then right) or one
+    bin_m: float  #: bin length, m
+    start_m: float  #: near edge of bin 0 ahead of the ego's front axle, m
+    lead_rear_axle_m: float  #: the lead's rear axle ahead of the ego's front axle, m
+    age_s: float  #: from the preview's camera frame to this frame, s
+
+    @property
+    def pages(self) -> int:
+        """Bin pages of the snapshot (the header not counted)."""
+        per_track = -(-self.bins // PREVIEW_BINS_PER_PAGE)
+        return per_track * (2 if self.sides else 1)
+
+    @property
+    def t_preview_s(self) -> float:
+        """When the preview was as of, on the receiver's clock (the frame's time if the age is
+        not available)."""
+        return self.t_rx_s - (self.age_s if math.isfinite(self.age_s) else 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class ReceivedPreviewPage:
+    """One bin page (1..) of an ``RP_PREVIEW`` snapshot: 4 bins, NaN where not available."""
+
+    t_rx_s: float
+    counter: int
+    cycle: int  #: ``PreviewCycle`` of the snapshot
+    page: int  #: ``PreviewPage``, 1..60
+    height_m: tuple[float, ...]  #: the 4 bins' heights, m (NaN: no estimate)
+    std_m: tuple[float, ...]  #: their standard deviations, m (NaN where the height is)
+
+
 #: what `OutputDecoder.decode` gives for a good frame
 ReceivedOutput = (
     ReceivedAlert
@@ -158,6 +221,8 @@ ReceivedOutput = (
     | ReceivedStatus
     | ReceivedRoadStatus
     | ReceivedInputStatus
+    | ReceivedPreviewHeader
+    | ReceivedPreviewPage
 )
 _OUTPUTS = (
     RP_ALERT,
@@ -167,7 +232,10 @@ _OUTPUTS = (
     RP_STATUS,
     RP_ROAD_STATUS,
     RP_INPUT_STATUS,
+    RP_PREVIEW,
 )
+#: outputs a DBC of version 1 does not have: decoded when the DBC has them
+_OUTPUTS_V2 = (RP_PREVIEW,)
 
 
 class OutputDecoder:
@@ -175,14 +243,23 @@ class OutputDecoder:
 
     ``decode`` returns None for a frame that is not one of roadpreview's outputs
     (``RP_ALERT``, ``RP_ALERT_DETAIL``, ``RP_ALERT_END``, ``RP_CONFIRM``, ``RP_STATUS``,
-    ``RP_ROAD_STATUS``) or fails a check; ``problems`` counts the reasons (``crc``, ``length``,
-    ``counter_repeated``) and ``lost`` the frames a counter jump says were
-    missed.
+    ``RP_ROAD_STATUS``, ``RP_INPUT_STATUS``, ``RP_PREVIEW``) or fails a check; ``problems``
+    counts the reasons (``crc``, ``length``, ``counter_repeated``, ``undecodable``: an
+    unknown ``PreviewPage``) and ``lost`` the frames a counter jump says were missed. ``db``
+    may be a DBC of version 1 (module docstring).
     """
 
     def __init__(self, db: Database | None = None) -> None:
         self.db = db or load_database()
-        self._messages = {m.frame_id: m for m in (self.db.get_message_by_name(n) for n in _OUTPUTS)}
+        names = {m.name for m in self.db.messages}
+        self._messages = {
+            m.frame_id: m
+            for m in (
+                self.db.get_message_by_name(n)
+                for n in _OUTPUTS
+                if n in names or n not in _OUTPUTS_V2
+            )
+        }
         self._layouts = {fid: e2e_layout(m) for fid, m in self._messages.items()}
         self._last_counter: dict[int, int] = {}
         self.problems: Counter[str] = Counter()
@@ -209,7 +286,12 @@ class OutputDecoder:
                 return None
             self.lost += delta - 1
         self._last_counter[m.frame_id] = counter
-        return m, dict(signal_values(m, data)), counter
+        try:
+            values = dict(signal_values(m, data))
+        except DecodeError:  # a multiplexor value the DBC does not define
+            self.problems["undecodable"] += 1
+            return None
+        return m, values, counter
 
     def decode(self, msg: can.Message) -> ReceivedOutput | None:
         """The content of one output frame, or None (class docstring)."""
@@ -252,6 +334,7 @@ class OutputDecoder:
             )
         if m.name == RP_ALERT_DETAIL:
             detectors = {c: n for n, c in DETECTOR_CODES.items()}
+            state = AlertState(code("AlertState")) if "AlertState" in v else AlertState.CONFIRMED
             return ReceivedAlertDetail(
                 t_rx_s=t,
                 counter=counter,
@@ -261,14 +344,16 @@ class OutputDecoder:
                 score=opt("AlertScore"),
                 lead_speed_mps=opt("AlertLeadSpeed", _KMH),
                 crossing_age_s=opt("AlertCrossingAge"),
+                state=state,
             )
         if m.name == RP_ALERT_END:
+            cause = code("EndCauseEx") if "EndCauseEx" in v else 0
             return ReceivedAlertEnd(
                 t_rx_s=t,
                 counter=counter,
                 alert_id=code("EndAlertId"),
                 reason=EndReason(code("EndReason")),
-                cause=EndCause(code("EndCause")),
+                cause=EndCause(cause or code("EndCause")),
                 sends=code("EndAlertSends"),
                 distance_m=opt("EndDistance"),
             )
@@ -290,6 +375,8 @@ class OutputDecoder:
                 degraded=bool(code("InputDegraded")),
                 counts={name: code(name) for name in INPUT_STATUS_GROUPS},
             )
+        if m.name == RP_PREVIEW:
+            return self._preview(v, t, counter)
         if m.name == RP_ROAD_STATUS:
             return ReceivedRoadStatus(
                 t_rx_s=t,
@@ -317,6 +404,39 @@ class OutputDecoder:
             heartbeat=code("StatusHeartbeat"),
         )
 
+    @staticmethod
+    def _preview(
+        v: dict[str, object], t: float, counter: int
+    ) -> ReceivedPreviewHeader | ReceivedPreviewPage:
+        """One ``RP_PREVIEW`` page (its signals ``v`` as cantools decoded them)."""
+
+        def num(name: str, factor: float = 1.0) -> float:
+            x = v[name]
+            return math.nan if isinstance(x, NamedSignalValue) else float(x) * factor  # type: ignore[arg-type]
+
+        def code(name: str) -> int:
+            x = v[name]
+            return int(x.value) if isinstance(x, NamedSignalValue) else int(x)  # type: ignore[call-overload]
+
+        page, cycle = code("PreviewPage"), code("PreviewCycle")
+        if page == 0:
+            return ReceivedPreviewHeader(
+                t_rx_s=t,
+                counter=counter,
+                cycle=cycle,
+                bins=code("PreviewBins"),
+                sides=bool(code("PreviewSides")),
+                bin_m=num("PreviewBinLength"),
+                start_m=num("PreviewStart"),
+                lead_rear_axle_m=num("PreviewLeadRearAxle"),
+                age_s=num("PreviewAge"),
+            )
+        height = tuple(num(f"PreviewHeight{i}", 1e-3) for i in range(PREVIEW_BINS_PER_PAGE))
+        std = tuple(
+            math.nan if math.isnan(h) else num(f"PreviewStd{i}", 1e-3) for i, h in enumerate(height)
+        )
+        return ReceivedPreviewPage(t, counter, cycle, page, height, std)
+
 
 __all__ = [
     "OutputDecoder",
@@ -326,6 +446,8 @@ __all__ = [
     "ReceivedConfirm",
     "ReceivedInputStatus",
     "ReceivedOutput",
+    "ReceivedPreviewHeader",
+    "ReceivedPreviewPage",
     "ReceivedRoadStatus",
     "ReceivedStatus",
 ]

@@ -53,6 +53,10 @@ class EndCause(IntEnum):
     STOPPED = 1  #: the sender stops (end of input, shutdown)
     TIMEOUT = 2  #: not passed within ``max_age_s`` of the crossing
     OVERFLOW = 3  #: too many active alerts: the oldest was dropped
+    #: a PROVISIONAL alert whose rear axle did not match (the two-axle fit did not confirm
+    #: it). ``RP_ALERT_END.EndCause`` has 2 bits: it carries NONE for this cause and the
+    #: full cause goes in ``EndCauseEx`` (DBC version 2)
+    NOT_CONFIRMED = 4
 
 
 @dataclass(frozen=True)
@@ -221,20 +225,38 @@ class AlertRepeater:
             a.confirmed = True
 
     def frame(
-        self, t_s: float, speed_mps: float | None, alerts: Sequence[Alert] = ()
+        self,
+        t_s: float,
+        speed_mps: float | None,
+        alerts: Sequence[Alert] = (),
+        cancelled: Sequence[Alert] = (),
     ) -> list[AlertSend | AlertEnd]:
-        """One camera frame: the ego's speed then and the alerts it raised."""
+        """One camera frame: the ego's speed then, the alerts it raised or changed (a
+        provisional alert confirmed comes again with its id) and the provisional alerts it
+        cancelled (ended CANCELLED, `EndCause.NOT_CONFIRMED`)."""
         step = self._odo.push(t_s, speed_mps)
         self.t = max(self.t, t_s)
         out: list[AlertSend | AlertEnd] = []
         for a in self._active.values():  # (an ended one too: its end frames say where)
             a.remaining_m -= step
+        for alert in cancelled:
+            out += self.cancel(alert.alert_id, t_s, EndCause.NOT_CONFIRMED)
         for alert in alerts:
             out += self._add(alert, t_s)
         for a in list(self._active.values()):
             out += self._due(a, t_s)
         self._forget(t_s)
         return out
+
+    def cancel(self, alert_id: int, t_s: float, cause: EndCause) -> list[AlertEnd]:
+        """End an active alert now as CANCELLED with ``cause`` (a provisional alert the
+        two-axle fit did not confirm: `EndCause.NOT_CONFIRMED`); its first end frame goes
+        out at once. Unknown or already ended ids: nothing."""
+        a = self._active.get(alert_id)
+        if a is None or a.ended is not None:
+            return []
+        self._end(a, t_s, EndReason.CANCELLED, cause)
+        return [self._end_frame(a, t_s)]
 
     def close(self, t_s: float | None = None) -> list[AlertEnd]:
         """The sender stops: every active alert is cancelled (STOPPED) and every end not
@@ -254,8 +276,21 @@ class AlertRepeater:
     def _add(self, alert: Alert, t: float) -> list[AlertSend | AlertEnd]:
         cfg = self.config
         out: list[AlertSend | AlertEnd] = []
-        if alert.alert_id in self._active:  # the same alert again: already repeated
-            return out
+        known = self._active.get(alert.alert_id)
+        if known is not None:
+            if known.ended is None and alert.state != known.alert.state:
+                # a provisional alert confirmed: the refined alert replaces it under the same
+                # id, sent at once (the receiver learns the state change without waiting a
+                # period); where the ego is stays what the odometry says
+                known.alert = alert
+                if math.isfinite(known.remaining_m) and alert.distance_m is not None:
+                    known.remaining_m = (
+                        alert.distance_m
+                        - cfg.camera_to_front_axle_m
+                        - self._odo.since(alert.t_s)
+                    )
+                known.next_t = t
+            return out  # the same alert again: already repeated
         if self.active >= cfg.max_active:
             oldest = next(a for a in self._active.values() if a.ended is None)
             self._end(oldest, t, EndReason.CANCELLED, EndCause.OVERFLOW)

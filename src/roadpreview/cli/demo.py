@@ -85,7 +85,11 @@ def _run(args: argparse.Namespace) -> int:
     assert result.match is not None
     print(result.match.table())
     print("\nalerts (what RP_ALERT carried, and what the ego felt when it got there):")
-    print(format_alerts(result.alerts, result.confirmations, result.video_start_s))
+    print(
+        format_alerts(
+            result.alerts, result.confirmations, result.video_start_s, result.run.cancelled
+        )
+    )
     road = result.road
     print(
         f"\nroad class (ISO 8608): {road.iso_class or 'unknown'} (ego's IMU "

@@ -51,7 +51,9 @@ class DetectorTrace:
     s: Array  #: the windowed std per frame (the std detector; NaN otherwise), px
     height_m: Array  #: the fitted road input per frame (two-axle; NaN otherwise), m
     events: list[AnomalyEvent] = field(default_factory=list)  #: suppressed ones included
-    alerts: list[Alert] = field(default_factory=list)
+    alerts: list[Alert] = field(default_factory=list)  #: CONFIRMED alerts
+    provisional: list[Alert] = field(default_factory=list)  #: PROVISIONAL alerts raised
+    cancelled: list[Alert] = field(default_factory=list)  #: provisional alerts cancelled
     confirmations: list[ConfirmationResult] = field(default_factory=list)
     #: the road's ISO 8608 class estimate at the end of the run (None: unknown)
     road_class: str | None = None
@@ -78,6 +80,8 @@ def run_detector(
     cols = np.full((6, n), np.nan)
     events: list[AnomalyEvent] = []
     alerts: list[Alert] = []
+    provisional: list[Alert] = []
+    cancelled: list[Alert] = []
     confirmations: list[ConfirmationResult] = []
     c0 = time.process_time()
     for i, sample in enumerate(samples):
@@ -86,12 +90,13 @@ def run_detector(
         f = det.frame
         if f is not None:
             cols[:, i] = (f.score, f.t_score, f.threshold, f.s, f.height_m, 0.0)
-        for e in new:
-            events.append(e)
-            a = builder.build(e)
-            if a is not None:
-                alerts.append(a)
-                confirmer.add(a.alert_id, a.t_s, a.distance_m, a.side)
+        events += new
+        batch = builder.take(new)
+        alerts += batch.confirmed
+        provisional += batch.provisional
+        cancelled += batch.cancelled
+        for a in batch.confirmed:
+            confirmer.add(a.alert_id, a.t_s, a.distance_m, a.side)
         confirmations += confirmer.push(sample.t, sample.ego_speed_mps, sample.ego_accel_peak_mps2)
         roughness.push(
             sample.t,
@@ -103,11 +108,12 @@ def run_detector(
             focal_px=sample.focal_px,
             lead_valid=sample.valid,
         )
-    for e in det.flush():
-        events.append(e)
-        a = builder.build(e)
-        if a is not None:
-            alerts.append(a)
+    tail = det.flush()
+    events += tail
+    batch = builder.take(tail)
+    alerts += batch.confirmed
+    provisional += batch.provisional
+    cancelled += batch.cancelled
     return DetectorTrace(
         detector=name,
         t=trace.t,
@@ -118,6 +124,8 @@ def run_detector(
         height_m=cols[4],
         events=events,
         alerts=alerts,
+        provisional=provisional,
+        cancelled=cancelled,
         confirmations=confirmations,
         road_class=roughness.state.iso_class,
         seconds=time.process_time() - c0,

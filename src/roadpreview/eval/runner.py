@@ -57,8 +57,25 @@ Array = NDArray[np.float64]
 #: bump when the trace layout or the way traces are produced changes
 TRACE_FORMAT = 5
 #: sub-packages and modules whose source does not change what a trace holds (the detectors
-#: run on the stored trajectory afterwards; the sinks only write files; the apps compose)
-_NOT_PIPELINE = ("eval", "cli", "bench", "sim", "anomaly", "sinks", "apps", "batch")
+#: and the preview run on the stored trajectory afterwards; the sinks only write files; the
+#: apps compose; the truth matching, the run summary and the CAN output side come after)
+_NOT_PIPELINE = (
+    "eval",
+    "cli",
+    "bench",
+    "sim",
+    "anomaly",
+    "preview",
+    "sinks",
+    "apps",
+    "batch",
+    "pipeline/truthmatch.py",
+    "pipeline/run_summary.py",
+    "canbus/output.py",
+    "canbus/received.py",
+    "canbus/receiver.py",
+    "canbus/repetition.py",
+)
 
 
 # -- digests ------------------------------------------------------------------------------------
@@ -373,10 +390,11 @@ def trace_keys(methods: MethodSet, job: RecordingJob) -> dict[str, str]:
 
 
 def _trajectory_settings(cfg: PipelineConfig) -> dict[str, Any]:
-    """The settings a trace depends on: all but the detectors' (``[anomaly]``), which run on
-    the stored trajectory afterwards."""
+    """The settings a trace depends on: all but the detectors' (``[anomaly]``) and the
+    preview's (``[preview]``), which run on the stored trajectory afterwards."""
     out: dict[str, Any] = to_mapping(cfg)
     out.pop("anomaly", None)
+    out.pop("preview", None)  # computed from the trajectory too, never stored in a trace
     return out
 
 

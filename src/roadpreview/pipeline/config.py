@@ -21,6 +21,7 @@ from roadpreview.fusion import BACKENDS
 from roadpreview.fusion.heave import HeaveConfig
 from roadpreview.pitch import ESTIMATORS
 from roadpreview.plausibility import PlausibilityConfig
+from roadpreview.preview.config import PreviewConfig
 from roadpreview.vision.frontend import VisionConfig
 
 
@@ -239,6 +240,8 @@ class PipelineConfig:
     heave: HeaveConfig = field(default_factory=HeaveConfig)
     ego: EgoVerticalConfig = field(default_factory=EgoVerticalConfig)
     anomaly: AnomalyConfig = field(default_factory=AnomalyConfig)
+    #: the road-profile preview (``RP_PREVIEW``) from the lead's response
+    preview: PreviewConfig = field(default_factory=PreviewConfig)
     can: CanStageConfig = field(default_factory=CanStageConfig)
     #: the input gate after the integrity checks: physical ranges, gyro spikes, stamps
     plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)

@@ -36,6 +36,7 @@ from roadpreview.ego.vertical import EgoVerticalMonitor
 from roadpreview.fusion import FusedPitch, VisualPitch, make_fusion
 from roadpreview.pipeline.config import PipelineConfig
 from roadpreview.pitch import PitchEstimator, make_estimator
+from roadpreview.preview import ProfileEstimator
 from roadpreview.types import (
     Alert,
     CameraFrame,
@@ -43,6 +44,7 @@ from roadpreview.types import (
     ConfirmationResult,
     FusionMode,
     ImuSample,
+    RoadPreview,
     RoadState,
     Sample,
     SpeedSample,
@@ -109,7 +111,14 @@ class FrameResult:
     #: what the detector was given at this frame (None: not run)
     sample: TrajectorySample | None = None
     events: tuple[AnomalyEvent, ...] = ()
+    #: CONFIRMED alerts raised at this frame (a provisional one confirmed keeps its id)
     alerts: tuple[Alert, ...] = ()
+    #: PROVISIONAL alerts raised at this frame (the lead's front axle: docs/detector.md)
+    provisional: tuple[Alert, ...] = ()
+    #: provisional alerts cancelled at this frame (the two-axle fit did not confirm them)
+    cancelled: tuple[Alert, ...] = ()
+    #: the road-profile preview made at this frame (every ``[preview] period_s``), else None
+    preview: RoadPreview | None = None
     #: alerts whose spot the ego passed at this frame, with what it felt there
     confirmations: tuple[ConfirmationResult, ...] = ()
 
@@ -213,6 +222,10 @@ class Pipeline:
         self.ego_vertical = EgoVerticalMonitor(cfg.ego)
         self.roughness = RoadRoughness(cfg.anomaly.roughness, cfg.anomaly.two_axle.vehicle)
         self.confirmer = EgoConfirmer(cfg.anomaly.confirm)
+        #: the road-profile preview (``RP_PREVIEW``), from the same trajectory samples
+        self.preview = ProfileEstimator(
+            cfg.preview, cfg.anomaly.two_axle.vehicle, principal_row_px=camera.cy
+        )
         self._lead = LeadKinematics(cfg.lead.window_s)
         self.compensator = Compensator(camera.fy, cfg.heave, cfg.plausibility)
         self._speed = EgoSpeed()
@@ -365,8 +378,14 @@ class Pipeline:
         )
         events = self.detector.restart() if lead.target_changed else []
         events += self.detector.push(sample)
-        alerts = tuple(a for a in (self.alert_builder.build(e) for e in events) if a is not None)
-        self.alerts_sent += len(alerts)
+        batch = self.alert_builder.take(events)
+        alerts = batch.confirmed
+        self.alerts_sent += batch.new_ids
+        if lead.target_changed:
+            self.preview.restart()
+        for a in batch.confirmed:  # (provisional alerts are too often false to draw)
+            self.preview.add_alert(a)
+        preview = self.preview.push(sample)
         road = self.roughness.push(
             t,
             ego_speed_mps=ego_speed,
@@ -422,7 +441,10 @@ class Pipeline:
             sample=sample,
             events=tuple(events),
             alerts=alerts,
+            provisional=batch.provisional,
+            cancelled=batch.cancelled,
             confirmations=confirmations,
+            preview=preview,
         )
         self.frames += 1
         self.last = result
@@ -430,10 +452,10 @@ class Pipeline:
 
     def finish(self) -> list[Alert]:
         """End of input: alerts for events still held by the non-maximum suppression."""
-        events = self.detector.flush()
-        alerts = [a for a in (self.alert_builder.build(e) for e in events) if a is not None]
-        self.alerts_sent += len(alerts)
-        return alerts
+        batch = self.alert_builder.take(self.detector.flush())
+        self.alerts_sent += batch.new_ids
+        # (provisional alerts left unconfirmed end with the sender: STOPPED)
+        return list(batch.confirmed)
 
     # -- status -------------------------------------------------------------------------
     def status(self) -> Status:

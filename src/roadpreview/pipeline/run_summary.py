@@ -49,7 +49,9 @@ class RunSummary:
     frames_out_of_order: int = 0  #: camera frames not after the previous one (skipped)
     frames_dropped: int = 0  #: frames skipped because a newer one was due (live runs)
     injected_frames: int = 0  #: image-less frames the watchdogs pushed
-    alerts: list[Alert] = field(default_factory=list)
+    alerts: list[Alert] = field(default_factory=list)  #: CONFIRMED alerts
+    provisional: list[Alert] = field(default_factory=list)  #: PROVISIONAL alerts raised
+    cancelled: list[Alert] = field(default_factory=list)  #: provisional alerts cancelled
     confirmations: list[ConfirmationResult] = field(default_factory=list)
     #: (time, mode, reason) at the first frame and at every change of the mode or of the
     #: gyro's state (none yet, recent, timed out: `fusion.mode_machine.gyro_state`), so

@@ -110,8 +110,18 @@ class CanSink(Sink, ABC):
 
     def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
         self.t_last = max(self.t_last, result.t)
-        self._send(self.repeater.frame(result.t, result.ego_speed_mps, result.alerts))
+        self._send(
+            self.repeater.frame(
+                result.t,
+                result.ego_speed_mps,
+                (*result.provisional, *result.alerts),
+                result.cancelled,
+            )
+        )
         self._confirmations(result.t, result.confirmations, status)
+        preview = result.preview
+        if preview is not None and preview.valid.any():  # (none: no RP_PREVIEW this cycle)
+            self._emit_all(self.encoders.preview_frames(preview, timestamp=result.t))
 
     def on_status(self, t_s: float, status: Status) -> None:
         self.t_last = max(self.t_last, t_s)
@@ -163,7 +173,7 @@ class CanLogSink(CanSink):
 
     def on_frame(self, frame: CameraFrame, result: FrameResult, status: Status) -> None:
         super().on_frame(frame, result, status)
-        if result.alerts or result.confirmations:  # on disk as they happen (an interrupt)
+        if result.alerts or result.provisional or result.cancelled or result.confirmations:
             self.writer.flush()
 
     def on_flush(self, t_s: float, alerts: Sequence[Alert], status: Status) -> None:

@@ -107,6 +107,16 @@ class EvalData:
             self._runs[key] = run_detector(self.traces(job)[method], anomaly, detector)
         return self._runs[key]
 
+    def detection_with(
+        self, job: RecordingJob, method: str, tag: str, anomaly: AnomalyConfig
+    ) -> DetectorTrace:
+        """The product's detector on ``method``'s trace of ``job`` with ``anomaly`` (a
+        variant of its settings, cached under ``tag``)."""
+        key = (job.key, method, tag)
+        if key not in self._runs:
+            self._runs[key] = run_detector(self.traces(job)[method], anomaly)
+        return self._runs[key]
+
     def scores(self, job: RecordingJob, detector: str = "std") -> dict[str, Scores]:
         """Every method's per-frame score of ``detector`` on ``job`` (the paper's
         experiments use the windowed std, its s at the frame's time)."""
