@@ -139,11 +139,42 @@ def test_report_has_the_error_budget(quick: dict[str, Any]) -> None:
     assert "### The ego's own anomalies, every ego-only crossing" in text
 
 
+def test_report_has_the_alert_timing_and_the_preview(quick: dict[str, Any]) -> None:
+    """Issue 27: per hit the latency of the first RP_ALERT (never later than the
+    confirmation) and the lead time; the provisional operating point beside the confirmed
+    one, whose recall and false alarms the provisional stage leaves as they are; the road
+    preview against the true road, in millimetres of a road."""
+    text = quick["report"].read_text()
+    e6 = quick["results"]["results"]["e6"]
+    p = e6["provisional"]
+    shipped, without = p["wild_shipped"], p["wild_without"]
+    assert (shipped["hits"], shipped["false_alarms"]) == (
+        without["hits"],
+        without["false_alarms"],
+    )
+    if shipped["hits"]:
+        assert shipped["latency_median_s"] <= shipped["latency_confirmed_median_s"] + 1e-9
+    assert shipped["provisional_fa_per_min"] >= 0.0
+    assert len(p["curve"]) >= 2
+    # a lower threshold never sends fewer provisional alerts
+    counts = [c["provisional"] for c in p["curve"]]
+    assert counts == sorted(counts, reverse=True)
+    assert "### Alert timing and provisional alerts" in text
+    pv = e6["preview"]["wild"]
+    bins = [x for x in pv["drives"].values() if x["bins"]]
+    assert bins, "the quick wild drives have previewed bins"
+    for x in bins:
+        assert 0.0 < x["rms_mm"] < 100.0
+        assert 0.0 < x["true_rms_mm"] < 100.0
+    assert "### Road preview (RP_PREVIEW)" in text
+
+
 def test_report_renders_without_the_new_blocks(quick: dict[str, Any]) -> None:
     data = copy.deepcopy(quick["results"])
     e6 = data["results"]["e6"]
-    for key in ("calibration", "reliability_figure", "svar", "generalization"):
+    for key in ("calibration", "reliability_figure", "svar", "generalization", "provisional"):
         e6.pop(key, None)
+    e6.pop("preview", None)
     e6["operating_points"]["detectors"]["std"]["fused-kalman"]["held_out"]["1"] = None
     text = render(data)
     assert "## E6: the product at its operating point" in text

@@ -194,3 +194,56 @@ def test_sigint_during_replay_keeps_every_alert_emitted_so_far(  # type: ignore[
     # each alert repeated until passed (or the stop): its id once, in order
     ids = list(dict.fromkeys(m.data[2] for m in can_alerts))
     assert ids == [a["alert_id"] % 256 for a in lines]
+
+
+def test_a_receiver_follows_each_alert_and_reassembles_the_preview_from_the_replay_log(  # type: ignore[no-untyped-def]
+    short_demo,
+    tmp_path: Path,
+) -> None:
+    """Issue 27 on a replayed drive: the CAN log's alerts, through the reference receiver,
+    go PROVISIONAL -> CONFIRMED -> ENDED, or PROVISIONAL -> ENDED (CANCELLED, NOT_CONFIRMED),
+    or CONFIRMED -> ENDED; every one ends; the confirmed ones are the run's alerts and the
+    provisional ones the run's provisional alerts. RP_PREVIEW reassembles to snapshots with
+    valid bins, whose heights on this smooth road are those of a road (centimetres)."""
+    from roadpreview.canbus import AlertReceiver, PreviewAssembler
+    from roadpreview.canbus.receiver import ReceiverState
+    from roadpreview.canbus.repetition import EndCause, EndReason
+
+    result = replay(ReplayInputs.from_recording(short_demo.folder), out=tmp_path)
+    frames = read_can_log(tmp_path / "alerts.blf")
+    dec = OutputDecoder()
+    rx = AlertReceiver()
+    previews = PreviewAssembler()
+    snapshots = []
+    for msg in frames:
+        item = dec.decode(msg)
+        rx.push(item)
+        p = previews.push(item)
+        if p is not None:
+            snapshots.append(p)
+    lives: dict[int, list[ReceiverState]] = {}
+    for tr in rx.transitions:
+        lives.setdefault(tr.alert_id, []).append(tr.after)
+    assert lives, "the 8 s demo raises alerts"
+    allowed = (
+        [ReceiverState.PROVISIONAL, ReceiverState.CONFIRMED, ReceiverState.ENDED],
+        [ReceiverState.PROVISIONAL, ReceiverState.ENDED],
+    )
+    for states in lives.values():
+        assert states in allowed
+    ended = {tr.alert_id: tr.life for tr in rx.transitions if tr.after is ReceiverState.ENDED}
+    confirmed = {i for i, s in lives.items() if ReceiverState.CONFIRMED in s}
+    for alert_id, life in ended.items():
+        if alert_id not in confirmed:  # never confirmed: cancelled (or stopped at the end)
+            assert life.reason is EndReason.CANCELLED
+            assert life.cause in (EndCause.NOT_CONFIRMED, EndCause.STOPPED)
+    run = result.run
+    assert len(confirmed) == len(run.alerts)
+    assert len(lives) == len(run.provisional) + sum(
+        not math.isfinite(a.t_first_s) for a in run.alerts
+    )
+    assert not rx.problems
+    assert snapshots, "RP_PREVIEW goes out while a lead is tracked"
+    valid = np.concatenate([s.height_m[s.valid] for s in snapshots])
+    assert valid.size > 0
+    assert np.percentile(np.abs(valid), 95) < 0.1  # within 10 cm: a road, not a blow-up

@@ -370,15 +370,19 @@ class TwoAxleDetector(LastFrame):
         ``provisional_threshold_z`` and the floor, away from the anomalies reported."""
         cfg = self.config
         amp = fit.early_amplitude
-        if amp is None or learning or not fit.metric:
+        if amp is None or not fit.metric:
             return []
-        sig = self._early_sigma(fit, amp)
+        # while the road is being learnt: the whitening model for the background and the
+        # wider margin, as the two-axle fit (the drive's first seconds are when its alerts
+        # come latest: the provisional one matters most there)
+        sig = self._early_sigma(fit, amp, learning=learning)
         z = np.abs(amp[:2]) / sig
         with np.errstate(invalid="ignore"):
             z = np.where(np.isfinite(z), z, -1.0)
         c, j = np.unravel_index(int(np.argmax(z)), z.shape)
         score = float(z[c, j])
-        if score < cfg.provisional_threshold_z:
+        factor = cfg.learning_threshold_factor if learning else 1.0
+        if score < cfg.provisional_threshold_z * factor:
             return []
         centre = float(fit.early_centre[j])
         lo, hi = cfg.refractory_s
@@ -457,13 +461,12 @@ class TwoAxleDetector(LastFrame):
         cand = self._picker._cand
         return cand is not None and abs(cand[2][0].t_s - centre) <= self.config.provisional_match_s
 
-    def _early_sigma(self, fit: _Fit, amp: FloatArray) -> FloatArray:
+    def _early_sigma(self, fit: _Fit, amp: FloatArray, *, learning: bool) -> FloatArray:
         """As `_sigma`, for the early fit (its own background level)."""
         cfg = self.config
         white = self._innovation_std[:, None] / np.sqrt(fit.early_energy)
-        sig = np.maximum(
-            white * self._early_background.level(), cfg.tracking_noise_px * fit.early_sigma_fit
-        )
+        level = 1.0 if learning else self._early_background.level()
+        sig = np.maximum(white * level, cfg.tracking_noise_px * fit.early_sigma_fit)
         comp = cfg.compensation_error_fraction * np.abs(amp[COMPENSATION])
         sig[HEAVE] = np.hypot(sig[HEAVE], np.where(np.isfinite(comp), comp, 0.0))
         leak = cfg.roll_leak_fraction * np.abs(amp[HEAVE])

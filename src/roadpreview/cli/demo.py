@@ -77,7 +77,7 @@ def _run(args: argparse.Namespace) -> int:
         "replaying it through the default pipeline (motion finder, robust pitch, kalman, heave) ..."
     )
     progress = Progress("replay", enabled=getattr(args, "verbosity", 0) >= 0)
-    result = replay(inputs, None, out, progress=progress)
+    result = replay(inputs, None, out, progress=progress, keep_results=True)
     print(
         f"\ntimes below: seconds from the video's frame 0 (Unix time {result.video_start_s:.3f} s)"
     )
@@ -90,6 +90,12 @@ def _run(args: argparse.Namespace) -> int:
             result.alerts, result.confirmations, result.video_start_s, result.run.cancelled
         )
     )
+    print(
+        "\nthe anomalies in the road preview (RP_PREVIEW) 1 s after the lead crossed them: the"
+        " largest height over each, as sent (the confirmed alerts' bins carry their height)"
+        " and from the lead's response alone:"
+    )
+    print(_preview_table(result, cfg, rec_dir))
     road = result.road
     print(
         f"\nroad class (ISO 8608): {road.iso_class or 'unknown'} (ego's IMU "
@@ -108,3 +114,43 @@ def _run(args: argparse.Namespace) -> int:
         f"(pipeline only); whole demo {time.perf_counter() - t0:.0f} s"
     )
     return 0
+
+
+def _preview_table(result: Any, cfg: Any, rec_dir: Path) -> str:
+    """The demo's anomalies as the preview showed them (`roadpreview.preview.at_anomalies`)."""
+    import json
+    import math
+
+    from roadpreview.pipeline.config import PipelineConfig
+    from roadpreview.preview import ProfileEstimator
+    from roadpreview.preview.truth import at_anomalies, drive_for_scenario
+
+    frames = result.results or []
+    sent = [r.preview for r in frames if r.preview is not None]
+    pc = PipelineConfig()
+    alone = ProfileEstimator(
+        pc.preview, pc.anomaly.two_axle.vehicle, principal_row_px=cfg.camera_model().cy
+    )
+    profile = []
+    for r in frames:
+        if r.target_changed:
+            alone.restart()
+        if r.sample is not None and (p := alone.push(r.sample)) is not None:
+            profile.append(p)
+    drive = drive_for_scenario(cfg)
+    events = json.loads((rec_dir / "truth.json").read_text())["events"]
+    t0 = result.video_start_s
+    rows = at_anomalies(sent, drive, events, t0=t0)
+    bare = {a.index: a for a in at_anomalies(profile, drive, events, t0=t0)}
+
+    def mm(x: float) -> str:
+        return f"{x:+5.0f} mm" if math.isfinite(x) else "    -   "
+
+    lines = ["  event  kind      true      length  ahead of the ego  previewed  profile alone"]
+    for a in rows:
+        ahead = f"{a.ahead_m:5.1f} m" if math.isfinite(a.ahead_m) else "   -   "
+        lines.append(
+            f"  {a.index:5d}  {a.kind:8s} {mm(a.height_mm)}  {a.length_m:4.1f} m   {ahead:>12s}"
+            f"     {mm(a.previewed_mm)}  {mm(bare[a.index].previewed_mm)}"
+        )
+    return "\n".join(lines)

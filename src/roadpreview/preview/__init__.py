@@ -31,13 +31,34 @@ compares previews with the simulator's road. ``docs/method.md``, "The road-profi
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from roadpreview.preview.config import PreviewConfig
 from roadpreview.preview.profile import FaceOperator, ProfileEstimator, face_operator
 from roadpreview.types import RoadPreview
 
+if TYPE_CHECKING:  # (typed as they are; imported on first use below)
+    from roadpreview.preview.truth import (
+        AnomalyInPreview,
+        PreviewError,
+        accel_correlation,
+        at_anomalies,
+        compare,
+        drive_for_scenario,
+        true_heights,
+    )
+
 #: `roadpreview.preview.truth` needs the simulator: imported lazily (math packages do not
 #: import `roadpreview.sim` on import)
-_TRUTH = ("PreviewError", "compare", "drive_for_scenario", "true_heights", "accel_correlation")
+_TRUTH = (
+    "AnomalyInPreview",
+    "PreviewError",
+    "accel_correlation",
+    "at_anomalies",
+    "compare",
+    "drive_for_scenario",
+    "true_heights",
+)
 
 
 def __getattr__(name: str) -> object:
@@ -49,12 +70,14 @@ def __getattr__(name: str) -> object:
 
 
 __all__ = [
+    "AnomalyInPreview",
     "FaceOperator",
     "PreviewConfig",
     "PreviewError",
     "ProfileEstimator",
     "RoadPreview",
     "accel_correlation",
+    "at_anomalies",
     "compare",
     "drive_for_scenario",
     "face_operator",

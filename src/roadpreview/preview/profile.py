@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
+from threadpoolctl import ThreadpoolController
 
 from roadpreview.anomaly.base import TrajectorySample
 from roadpreview.anomaly.response import NominalVehicle, TemplateBank
@@ -80,6 +81,13 @@ class FaceOperator:
     lv: FloatArray
 
 
+@functools.cache
+def _blas() -> ThreadpoolController:
+    """The process's thread pools, found once (a search of the loaded libraries costs
+    milliseconds: not at every solve)."""
+    return ThreadpoolController()
+
+
 def _quantised(dt: float) -> float:
     """``dt`` on a grid of 1 % steps (one operator per frame rate, not per jitter)."""
     if not dt > 0:
@@ -122,20 +130,23 @@ def _smoother(n_obs: int, dt_s: float) -> tuple[FloatArray, FloatArray]:
     return design @ fit, slope @ fit
 
 
-def _bin_matrix(x_k: FloatArray, edges: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """(bins, len(x_k)) weights averaging the linear interpolant of values at the increasing
-    positions ``x_k`` over each bin between ``edges``; a bin whose centre is outside the
-    positions' span is invalid."""
+def _bin_average(
+    x_k: FloatArray, edges: FloatArray, values: FloatArray
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """(bins, ...) the mean over each bin between ``edges`` of the linear interpolant of
+    ``values`` (rows at the increasing positions ``x_k``), at `_SUB_POINTS` points per bin
+    (a gather of two rows per point: no dense bins x positions matrix); and which bins
+    have their centre inside the positions' span (the others are invalid)."""
     nb, n = edges.size - 1, x_k.size
     frac = (np.arange(_SUB_POINTS) + 0.5) / _SUB_POINTS
     pos = np.clip((edges[:-1, None] + (edges[1] - edges[0]) * frac).ravel(), x_k[0], x_k[-1])
     i1 = np.clip(np.searchsorted(x_k, pos, side="right"), 1, n - 1)
     x0 = x_k[i1 - 1]
-    w1 = (pos - x0) / (x_k[i1] - x0)
-    base = np.repeat(np.arange(nb) * n, _SUB_POINTS) + i1
-    b = np.bincount(base - 1, 1.0 - w1, nb * n) + np.bincount(base, w1, nb * n)
+    w1 = ((pos - x0) / (x_k[i1] - x0))[:, None]
+    at = values[i1 - 1] * (1.0 - w1) + values[i1] * w1  # (nb * SUB, ...)
+    mean = at.reshape(nb, _SUB_POINTS, *values.shape[1:]).mean(axis=1)
     centres = edges[:-1] + 0.5 * (edges[1] - edges[0])
-    return b.reshape(nb, n) / _SUB_POINTS, (centres >= x_k[0]) & (centres <= x_k[-1])
+    return np.asarray(mean, dtype=np.float64), (centres >= x_k[0]) & (centres <= x_k[-1])
 
 
 def _on_grid(
@@ -332,10 +343,13 @@ class ProfileEstimator:
     # -- the solve (at the period) -------------------------------------------------------
     def preview(self, t: float) -> RoadPreview:
         """The preview as of the last pushed frame at ``t`` (NaN bins where no estimate)."""
-        win = self._window(t)
-        if win is None:
-            return self._overlay(self._empty(t, math.nan))
-        return self._overlay(self._solve(t, win))
+        # small matrices (a few hundred): BLAS threads only cost here (on a loaded 2-core
+        # machine they multiplied the CPU time of a solve by 5-10)
+        with _blas().limit(limits=1, user_api="blas"):
+            win = self._window(t)
+            if win is None:
+                return self._overlay(self._empty(t, math.nan))
+            return self._overlay(self._solve(t, win))
 
     def _empty(self, t: float, lead_rear_m: float) -> RoadPreview:
         cfg = self.config
@@ -361,7 +375,9 @@ class ProfileEstimator:
             return None
         recent = np.diff(last[:, COL_T]).tolist()
         # the median step, to 1 %: a cache key (frame stamps jitter; the grid is resampled)
-        dt = _quantised(sorted(recent)[len(recent) // 2])
+        # (at most grid_hz: the body's response is below 3 Hz, and the cost of a solve grows
+        # with the square of the grid's length)
+        dt = _quantised(max(sorted(recent)[len(recent) // 2], 1.0 / cfg.grid_hz))
         if not dt > 0:
             return None
         ahead = veh.rear_overhang_m + veh.wheelbase_m - cfg.camera_to_front_axle_m
@@ -430,13 +446,13 @@ class ProfileEstimator:
         if nb == 0:
             return self._empty(t, win.lead_rear_axle_m)
         edges = cfg.bin_m * np.arange(nb + 1, dtype=np.float64)
-        b_obs, ok = _bin_matrix(win.x_m, edges)
-        if not ok.any():
-            return self._empty(t, win.lead_rear_axle_m)
         # the bins' means per eigen-direction (w_k = sum_{j <= k} u_j, u = V a), relative to
         # the least-squares line over the valid bins: the level and the grade are absorbed
         # by the drift and not observable
-        gv = b_obs[ok] @ op.lv
+        gv_all, ok = _bin_average(win.x_m, edges, op.lv)
+        if not ok.any():
+            return self._empty(t, win.lead_rear_axle_m)
+        gv = gv_all[ok]
         centres = (edges[:-1] + 0.5 * cfg.bin_m)[ok]
         gv = gv - gv.mean(axis=0)
         if centres.size >= 3:

@@ -224,3 +224,61 @@ __all__ = [
     "reference_plane",
     "true_heights",
 ]
+
+
+@dataclass(frozen=True)
+class AnomalyInPreview:
+    """How one true anomaly appeared in the preview ``delay_s`` after the lead crossed it."""
+
+    index: int  #: the truth event's index
+    kind: str
+    height_mm: float  #: its true height (signed)
+    length_m: float
+    t_s: float  #: the preview's time (NaN: no preview then)
+    ahead_m: float  #: the anomaly ahead of the ego's front axle then, m
+    previewed_mm: float  #: the previewed height of largest magnitude over it (NaN: none)
+
+
+def at_anomalies(
+    previews: Sequence[RoadPreview],
+    drive: DriveMotion,
+    events: Sequence[dict[str, object]],
+    *,
+    delay_s: float = 1.0,
+    t0: float = 0.0,
+) -> list[AnomalyInPreview]:
+    """For each truth event the lead crossed (``truth.json``'s events, times from ``t0``):
+    the first preview ``delay_s`` after its front axle did, and the previewed height over
+    the anomaly's extent (± half its length and a bin): the largest in magnitude, on any
+    track."""
+    cfg = drive.config
+    times = np.array([p.t_s for p in previews])
+    out = []
+    for e in events:
+        t_lead = e.get("lead_front_t_s")
+        if t_lead is None or not e.get("lead_hits"):
+            continue
+        length = float(e.get("length_m") or 0.0)  # type: ignore[arg-type]
+        k = int(np.searchsorted(times, t0 + float(t_lead) + delay_s))  # type: ignore[arg-type]
+        t, ahead, seen = math.nan, math.nan, math.nan
+        if k < len(previews):
+            p = previews[k]
+            t = p.t_s
+            x_front = float(drive.ego.sample([t - t0]).x[0]) + cfg.ego.cg_to_front_axle_m
+            ahead = float(e["apex_x_m"]) - x_front  # type: ignore[arg-type]
+            over = np.abs(p.centres_m - ahead) <= 0.5 * length + p.bin_m
+            h = np.where(over[None, :] & p.valid, p.height_m, np.nan)
+            if np.isfinite(h).any():
+                seen = 1e3 * float(h.flat[int(np.nanargmax(np.abs(h)))])
+        out.append(
+            AnomalyInPreview(
+                int(e["index"]),  # type: ignore[call-overload]
+                str(e["kind"]),
+                1e3 * float(e["height_m"]),  # type: ignore[arg-type]
+                length,
+                t,
+                ahead,
+                seen,
+            )
+        )
+    return out

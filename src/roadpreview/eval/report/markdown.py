@@ -71,10 +71,16 @@ def render(d: Mapping[str, Any], *, fig_prefix: str = "eval/", command: str = ""
         f"{t['workers']} worker process(es)."
     )
     w("")
+    for r in d.get("reruns") or []:
+        w(
+            f"> **Re-run at commit {r.get('git_commit', '?')}:** {r.get('what', '')} "
+            f"{r.get('why', '')}"
+        )
+        w("")
     w("## How to regenerate")
     w("")
     w("```sh")
-    w("roadpreview evaluate --out runs/eval --report docs/evaluation.md        # full, < 1 h")
+    w("roadpreview evaluate --out runs/eval --report docs/evaluation.md        # full, ~2 h")
     w("roadpreview evaluate --quick --out runs/eval-quick --report docs/evaluation.md  # quick")
     w("```")
     if command:

@@ -1,7 +1,7 @@
 """The report's section of E6, the product at its operating point
 (`roadpreview.eval.product`): operating points, the configured thresholds, the SVAR-like
 subset, height, alert confidence, ego confirmation, road class, the generalization
-suite."""
+suite, the alerts' timing with the provisional alerts, the road preview."""
 
 from __future__ import annotations
 
@@ -70,6 +70,8 @@ def e6_section(d: Mapping[str, Any], w: Any, fp: str) -> None:
     _e6_confirmation(d, w)
     _e6_road_class(d, w)
     _e6_generalization(d, w)
+    _e6_timing(d, w)
+    _e6_preview(d, w)
 
 
 def _e6_operating_points(d: Mapping[str, Any], w: Any) -> None:
@@ -486,3 +488,189 @@ def _e6_generalization(d: Mapping[str, Any], w: Any) -> None:
         )
     )
     w("")
+
+
+def _timing_row(name: str, t: Mapping[str, Any]) -> list[str]:
+    """One row of the timing table from a `roadpreview.eval.provisional.Timing` dict."""
+    far = t.get("headway_far") or 0
+    short = t.get("lead_time_far_short")
+    return [
+        name,
+        _hits(t),
+        _fa(t),
+        f"{num(t.get('latency_share'))} ({_int(t.get('latency_le_target'))}/{_int(t.get('hits'))})",
+        f"{num(t.get('latency_median_s'))} / {num(t.get('latency_confirmed_median_s'))}",
+        f"{_int(short)} of {far} (min {num(t.get('lead_time_far_min_s'))} s)" if far else "–",
+        _int(t.get("late")),
+        f"{num(t.get('provisional_fa_per_min'))} ({_int(t.get('provisional_false'))})",
+        f"{num(t.get('cancelled_share'))} ({_int(t.get('cancelled_in_time'))})",
+        f"{_int(t.get('provisional_confirmed'))} / {_int(t.get('provisional'))}",
+    ]
+
+
+def _e6_timing(d: Mapping[str, Any], w: Any) -> None:
+    p = d["results"]["e6"].get("provisional")
+    w("### Alert timing and provisional alerts")
+    w("")
+    chosen = ", ".join(
+        num(x, "g") for x in ((p or {}).get("held_out") or {}).get("thresholds") or []
+    )
+    if not p:
+        w("Not in this run (the product's detector has no provisional stage here).")
+        w("")
+        return
+    w(
+        "When the controller hears of an anomaly (`roadpreview.eval.provisional`): per hit "
+        "(an anomaly with f|δ|/d >= 1 px the lead crossed, matched by a confirmed alert), the "
+        "latency of its first `RP_ALERT` (the PROVISIONAL one when the alert had one) and of "
+        "its confirmation after the lead's front axle crossed the anomaly's apex "
+        f"(target: <= {num(p.get('latency_target_s'), 'g')} s for 90 % of hits), the lead time "
+        "left for the ego (its front axle at the anomaly minus the first RP_ALERT; target: "
+        f">= {num(p.get('lead_time_min_s'), 'g')} s at a time headway >= "
+        f"{num(p.get('headway_min_s'), 'g')} s: the column counts the hits at such a headway "
+        "that miss it), and the hits alerted only after the ego arrived ('late'). Provisional "
+        "alerts: their false alarms per minute (target <= "
+        f"{num(p.get('fa_target_per_min'), 'g')}), the share of those CANCELLED before the ego "
+        "would have reached the spot they named (target >= 80 %), and how many were confirmed. "
+        "The confirmed alerts' recall and false alarms are the product's: the provisional stage "
+        "leaves them unchanged ('without' runs the same detector with `provisional = false`). "
+        f"Threshold `provisional_threshold_z`: shipped {num(p.get('shipped_threshold'), 'g')}, "
+        "chosen on the wild set (the training data) for the target rate; held out: per fold the "
+        "lowest of the grid keeping the training folds at or below it "
+        f"(chosen: {chosen})."
+    )
+    w("")
+    header = [
+        "",
+        "recall (confirmed)",
+        "false alarms / min",
+        "first RP_ALERT <= target",
+        "latency median, first / confirmed (s)",
+        "short lead time at headway >= target",
+        "late",
+        "provisional false / min",
+        "cancelled in time",
+        "provisional confirmed / sent",
+    ]
+    rows = []
+    if p.get("wild_without"):
+        rows.append(_timing_row("wild, without provisional", p["wild_without"]))
+    rows.append(_timing_row("wild, shipped threshold (tuned here)", p.get("wild_shipped") or {}))
+    rows.append(_timing_row("wild, held-out folds", p.get("held_out") or {}))
+    g = p.get("generalization") or {}
+    if g.get("pooled"):
+        rows.append(_timing_row("**generalization suite** (held out)", g["pooled"]))
+    w(md_table(header, rows))
+    w("")
+    curve = p.get("curve") or []
+    if curve:
+        w("The wild set over the provisional threshold (every drive):")
+        w("")
+        w(
+            md_table(
+                header[:1] + header[3:],
+                [
+                    _timing_row(f"z >= {num(c.get('threshold'), 'g')}", c)[:1]
+                    + _timing_row("", c)[3:]
+                    for c in curve
+                ],
+            )
+        )
+        w("")
+    drives = g.get("drives") or {}
+    if drives:
+        w("Per drive of the generalization suite (shipped threshold):")
+        w("")
+        w(md_table(header, [_timing_row(name, t) for name, t in drives.items()]))
+        w("")
+    cal = p.get("calibration") or {}
+    if cal.get("logit"):
+        a, b = cal["logit"]
+        w(
+            f"Provisional confidence: logistic fit on the wild set's {cal.get('n')} provisional "
+            f"alerts ({cal.get('real')} real) at the shipped threshold: a = {num(a)}, "
+            f"b = {num(b)} (`provisional_confidence_logit`)."
+        )
+        w("")
+
+
+def _e6_preview(d: Mapping[str, Any], w: Any) -> None:
+    p = d["results"]["e6"].get("preview")
+    w("### Road preview (RP_PREVIEW)")
+    w("")
+    if not p:
+        w("Not in this run (`[preview] enabled = false`).")
+        w("")
+        return
+    w(
+        "The previewed road against the simulator's (`roadpreview.eval.preview`): over the "
+        f"bins whose spot the lead's wheels passed within the last {num(p.get('recent_s'), 'g')} "
+        "s before each preview, each side's least-squares line removed as the preview's "
+        "(level and grade are not observable). RMS of the height error in mm: the product (the "
+        "profile with the confirmed alerts' bins), the profile alone, and the profile alone on "
+        "the true compensated trajectory (every compensation term and the tracked row from the "
+        "truth: what the trajectory leaves to the inversion itself); the true road's RMS at "
+        "the same bins is the error's scale (an estimate of 0 would score it). 'ego accel': "
+        "the correlation of the ego's vertical acceleration predicted from the previewed road "
+        "under its front axle (the nominal quarter car) with the one the simulator's ego had. "
+        "Road classes A-C are the target (<= 15 mm); the generalization suite is reported "
+        "apart (never tuned on; the preview has no tuned parameter)."
+    )
+    w("")
+    header = [
+        "",
+        "drives",
+        "RMS error (mm)",
+        "profile alone",
+        "on the true trajectory",
+        "true road RMS",
+        "ego accel (median r)",
+    ]
+    rows = []
+    for ds, label in (("wild", "wild"), ("generalization", "**generalization suite**")):
+        x = p.get(ds) or {}
+        for part, name in (("target", "A-C"), ("rough", "D-E")):
+            t = x.get(part) or {}
+            if not t.get("bins"):
+                continue
+            rows.append(
+                [
+                    f"{label}, class {name}",
+                    _int(t.get("drives")),
+                    num(t.get("rms_mm"), ".1f"),
+                    num(t.get("rms_alone_mm"), ".1f"),
+                    num(t.get("rms_true_trajectory_mm"), ".1f"),
+                    num(t.get("true_rms_mm"), ".1f"),
+                    num(t.get("accel_correlation_median")),
+                ]
+            )
+    w(md_table(header, rows))
+    w("")
+    drives = (p.get("generalization") or {}).get("drives") or {}
+    if drives:
+        w("Per drive of the generalization suite:")
+        w("")
+        w(
+            md_table(
+                [
+                    "drive",
+                    "class",
+                    "RMS error (mm)",
+                    "profile alone",
+                    "true road RMS",
+                    "ego accel r",
+                ],
+                [
+                    [
+                        n,
+                        x.get("road_class") or "–",
+                        num(x.get("rms_mm"), ".1f"),
+                        num(x.get("rms_alone_mm"), ".1f"),
+                        num(x.get("true_rms_mm"), ".1f"),
+                        num(x.get("accel_correlation")),
+                    ]
+                    for n, x in drives.items()
+                ],
+            )
+        )
+        w("")
