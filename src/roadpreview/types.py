@@ -273,7 +273,8 @@ class RoadPreview:
     Bins of ``bin_m`` from the ego's front axle (bin k covers [start_m + k bin_m, start_m +
     (k + 1) bin_m) ahead of it) to the lead's rear axle. ``height_m`` and ``std_m`` are
     (tracks, bins): one track (both wheel tracks alike) or two (left, right), heights
-    relative to the road's local mean level (up +); NaN where a bin has no valid estimate.
+    relative to the road's local line (the least-squares line over the track's valid bins:
+    level and grade are not observable; up +); NaN where a bin has no valid estimate.
     """
 
     t_s: float  #: the frame the preview is as of, s

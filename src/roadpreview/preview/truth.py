@@ -147,7 +147,9 @@ def ego_front_road(
     ordered = [p for p in previews if p.valid.any()]
     fronts = [float(drive.ego.sample([p.t_s]).x[0]) + cfg.ego.cg_to_front_axle_m for p in ordered]
     for i, p in enumerate(ordered):  # previews, not frames
-        h = np.nanmean(np.where(p.valid, p.height_m, np.nan), axis=0)
+        n = p.valid.sum(axis=0)
+        h = np.where(p.valid, p.height_m, 0.0).sum(axis=0) / np.where(n > 0, n, 1)
+        h = np.where(n > 0, h, np.nan)  # (no track valid: no estimate)
         x = fronts[i] + p.centres_m
         ok = np.isfinite(h)
         until = fronts[i + 1] if i + 1 < len(ordered) else fronts[i] + p.bin_m
@@ -162,9 +164,10 @@ def ego_front_road(
                 h = h + np.mean(np.interp(x[shared], prev_x, prev_h) - h[shared])
             elif prev_x.size:
                 h = h + (prev_h[-1] - h[0])
-        start = x >= (xs[-1][-1] if xs else -math.inf)
-        xs.append(x[start] if xs else x)
-        hs.append(h[start] if hs else h)
+        start = x > (xs[-1][-1] if xs else -math.inf)
+        if start.any():  # (a piece the last one covers whole adds nothing)
+            xs.append(x[start])
+            hs.append(h[start])
     if not xs:
         return np.zeros(0), np.zeros(0)
     return np.concatenate(xs), np.concatenate(hs)
