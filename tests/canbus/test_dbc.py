@@ -34,6 +34,7 @@ from roadpreview.canbus.dbc import (
 )
 from roadpreview.canbus.samples import ImuMeasurements
 from roadpreview.errors import InputDataError
+from roadpreview.preview import PreviewConfig
 from roadpreview.sim.canlog import (
     DEFAULT_T0_UNIX_S,
     imu_to_messages,
@@ -157,9 +158,15 @@ def test_messages_are_complete_and_in_the_documented_ranges(db: Database) -> Non
     for cyclic in (RP_STATUS, RP_ROAD_STATUS):
         assert db.get_message_by_name(cyclic).cycle_time == 100
         assert db.get_message_by_name(cyclic).send_type == "Cyclic"
-    # every 100 ms while an alert is active / the inputs have problems / a preview exists
-    for repeated in (RP_ALERT, RP_ALERT_DETAIL, RP_INPUT_STATUS, RP_PREVIEW):
-        assert db.get_message_by_name(repeated).cycle_time == 100
+    # every 100 ms while an alert is active / the inputs have problems; a preview every
+    # 200 ms (`[preview] period_s`) while one exists
+    for repeated, cycle in (
+        (RP_ALERT, 100),
+        (RP_ALERT_DETAIL, 100),
+        (RP_INPUT_STATUS, 100),
+        (RP_PREVIEW, round(1000 * PreviewConfig().period_s)),
+    ):
+        assert db.get_message_by_name(repeated).cycle_time == cycle
         assert db.get_message_by_name(repeated).send_type == "IfActive"
     for event in (RP_CONFIRM, RP_ALERT_END):
         assert db.get_message_by_name(event).send_type == "Event"

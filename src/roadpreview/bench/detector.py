@@ -10,7 +10,7 @@ events found (a check that the run did the work). Target: the product's detector
 
 Issue 27's additions, on the same samples in the same run: the two-axle detector without
 its provisional stage (``provisional = false``), and the road-profile preview
-(`roadpreview.preview.ProfileEstimator`, a solve every 0.1 s); what the issue added per
+(`roadpreview.preview.ProfileEstimator`, a solve every 0.2 s); what the issue added per
 frame is the provisional stage's difference plus the preview (target <= 0.3 ms).
 """
 
