@@ -225,13 +225,7 @@ class TwoAxleDetector(LastFrame):
         self.bank = TemplateBank.cached(cfg.vehicle, cfg.durations_s)
         self._durations = np.asarray(cfg.durations_s, dtype=float)
         self._ring = Ring(cfg.buffer_frames, NCOL)
-        self._background = CfarBackground(
-            cfg.background_s,
-            cfg.background_short_s,
-            (2, len(cfg.durations_s)),
-            cfg.background_refresh_frames,
-            capacity=math.ceil(cfg.background_s * _MAX_FPS),
-        )
+        self._background = self._new_background()
         self._suppression = SuppressionTracker(
             lead_accel_limit_mps2=cfg.lead_accel_limit_mps2,
             settle_s=cfg.imu_only_settle_s,
@@ -240,13 +234,7 @@ class TwoAxleDetector(LastFrame):
         self._picker = self._new_picker()
         # the early fit: its own background (its amplitudes are not the full fit's), its
         # templates, the provisional events waiting for the two-axle fit
-        self._early_background = CfarBackground(
-            cfg.background_s,
-            cfg.background_short_s,
-            (2, len(cfg.durations_s)),
-            cfg.background_refresh_frames,
-            capacity=math.ceil(cfg.background_s * _MAX_FPS),
-        )
+        self._early_background = self._new_background()
         self._early_grids: dict[tuple[float, float], TemplateGrid] = {}
         self._early_whitened: dict[
             tuple[float, float, int, int], tuple[FloatArray, FloatArray]
@@ -278,6 +266,16 @@ class TwoAxleDetector(LastFrame):
         self._dt_at = 0
         self._rate_at = -_RANGE_RATE_EVERY  # frame count of the last range-rate fit
         self._focal = math.nan
+
+    def _new_background(self) -> CfarBackground:
+        cfg = self.config
+        return CfarBackground(
+            cfg.background_s,
+            cfg.background_short_s,
+            (2, len(cfg.durations_s)),
+            cfg.background_refresh_frames,
+            capacity=math.ceil(cfg.background_s * _MAX_FPS),
+        )
 
     def _new_picker(self) -> _ExcursionPicker:
         return _ExcursionPicker(self.config.peak_window_s)
@@ -637,13 +635,7 @@ class TwoAxleDetector(LastFrame):
         end of the same whitened channels (the same filters, a shorter window)."""
         cfg = self.config
         lag = 0.5 * self._durations + cfg.provisional_lag_s
-        key = (tau, dt)
-        grid = self._early_grids.get(key)
-        if grid is None:
-            grid = template_grid(self.bank, cfg, tau, dt, lag)
-            if len(self._early_grids) >= _MAX_GRIDS:
-                self._early_grids.pop(next(iter(self._early_grids)))
-            self._early_grids[key] = grid
+        grid = self._grid(tau, dt, lag, self._early_grids)
         n = grid.s.shape[1]
         if x.shape[0] < n:
             return
@@ -682,16 +674,24 @@ class TwoAxleDetector(LastFrame):
             self._dt_at = n
         return self._dt
 
-    def _grid(self, tau: float, dt: float, lag: FloatArray) -> TemplateGrid:
+    def _grid(
+        self,
+        tau: float,
+        dt: float,
+        lag: FloatArray,
+        cache: dict[tuple[float, float], TemplateGrid] | None = None,
+    ) -> TemplateGrid:
         """The templates on the regular frame grid ending now (`template_grid`), cached per
-        (τ, frame interval)."""
+        (τ, frame interval) in ``cache`` (default: the two-axle fit's; the early fit's lags
+        are other ones)."""
+        store = self._grids if cache is None else cache
         key = (tau, dt)
-        grid = self._grids.get(key)
+        grid = store.get(key)
         if grid is None:
             grid = template_grid(self.bank, self.config, tau, dt, lag)
-            if len(self._grids) >= _MAX_GRIDS:
-                self._grids.pop(next(iter(self._grids)))
-            self._grids[key] = grid
+            if len(store) >= _MAX_GRIDS:
+                store.pop(next(iter(store)))
+            store[key] = grid
         return grid
 
     def _whitened(
