@@ -243,12 +243,19 @@ def synthetic() -> _Synthetic:
     return _Synthetic(sink.messages, alerts, arrival)
 
 
-def _errors(rx: ChassisReceiver, arrival_s: Callable[[int], float | None]) -> np.ndarray:
-    """TTA at receipt minus the truth, for every receipt with a TTA (s)."""
+def _errors(
+    rx: ChassisReceiver,
+    arrival_s: Callable[[int], float | None],
+    since_s: Callable[[int], float] = lambda _: -math.inf,
+    until_s: Callable[[int], float] = lambda _: math.inf,
+) -> np.ndarray:
+    """TTA at receipt minus the truth, for every receipt with a TTA (s) received in
+    [since_s, until_s) of its alert (default: all)."""
     out = []
     for r in rx.receipts:
         truth = arrival_s(r.alert_id)
-        if r.tta_s is not None and truth is not None:
+        inside = since_s(r.alert_id) - 1e-6 <= r.t_s < until_s(r.alert_id) - 1e-6
+        if r.tta_s is not None and truth is not None and inside:
             out.append(r.tta_s - (truth - r.t_s))
     return np.array(out)
 
@@ -313,19 +320,26 @@ def test_the_demo_drive_alerts_arrive_through_a_lossy_bus(plain_db: Database, de
     assert alerts, "the demo's first bump is detected (test_demo_detection.py)"
     assert set(arrival) == {a.alert_id % 256 for a in alerts}  # every alert is a true one
     clean = _receive(plain_db, frames)
-    err0 = _errors(clean, arrival.get)
+    # an alert may go out PROVISIONAL first (issue 27): its crossing is the early fit's,
+    # coarser; the CONFIRMED sends carry the two-axle fit's
+    confirmed_at = {a.alert_id % 256: a.t_emit_s for a in alerts}
+    err0 = _errors(clean, arrival.get, confirmed_at.__getitem__)
+    early = _errors(clean, arrival.get, until_s=confirmed_at.__getitem__)
     assert len(err0) >= 5
     # the emission's own error: the lead-distance measurement over the speed
     assert np.max(np.abs(err0)) <= 0.1, err0
     # later sends keep it: odometry and quantisation add at most 0.03 s
     assert np.ptp(err0) <= 0.03, err0
+    # the provisional sends: their crossing within a third of a second (the early fit fires
+    # when its evidence suffices, up to the rear axle's lag after the front axle)
+    assert early.size == 0 or np.max(np.abs(early)) <= 0.35, early
     received, errs = [], []
     for seed in range(20):
         rx = _receive(plain_db, _lossy(frames, seed))
         assert rx.problems == {}
         assert {i for _, i in rx.started} == set(arrival), seed  # every alert, every seed
         received.append(len(rx.started))
-        errs.append(_errors(rx, arrival.get))
+        errs.append(_errors(rx, arrival.get, confirmed_at.__getitem__))
     err = np.concatenate(errs)
     assert np.max(np.abs(err)) <= 0.1
     print(  # the figures of the issue's report (pytest -s)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from roadpreview.anomaly.base import TrajectorySample
-from roadpreview.preview import ProfileEstimator, RoadPreview, compare, true_heights
+from roadpreview.eval.road_truth import compare, true_heights
+from roadpreview.preview import ProfileEstimator, RoadPreview
 from roadpreview.sim.motion import DriveMotion, MotionConfig, simulate_motion
 from roadpreview.sim.road import RoadConfig
 
@@ -66,7 +67,7 @@ def test_rms_against_the_true_road(iso: str, speed_kmh: float, gap_m: float) -> 
     previews, drive = drive_previews(iso, speed_kmh, gap_m, sides=False)
     err = compare(previews, drive)
     assert err
-    assert err.n_bins > 1000
+    assert err.n_bins > 400  # (a preview every 0.2 s over 8 s, tens of bins each)
     assert err.rms_mm <= 15.0
     assert err.rms_mm < 0.7 * err.true_rms_mm
 

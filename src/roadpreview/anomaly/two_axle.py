@@ -53,11 +53,10 @@ channels on the frame grid, the templates on it, the whitening filters, the back
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field, replace
+from collections.abc import Iterable
+from dataclasses import replace
 
 import numpy as np
-from numpy.typing import NDArray
 
 from roadpreview.anomaly.base import (
     AnomalyEvent,
@@ -71,56 +70,41 @@ from roadpreview.anomaly.base import (
 from roadpreview.anomaly.config import TwoAxleConfig
 from roadpreview.anomaly.response import TemplateBank
 from roadpreview.anomaly.suppression import SuppressionTracker
+from roadpreview.anomaly.two_axle_events import (
+    ExcursionPicker,
+    Pending,
+    TwoAxleRun,
+    lead_at,
+    provisional_event,
+)
+from roadpreview.anomaly.two_axle_refine import Hypothesis as _Hypothesis
+from roadpreview.anomaly.two_axle_refine import refine_event
 from roadpreview.anomaly.two_axle_signal import (
     AR_ORDER,
     COL_D,
-    COL_DSTD,
     COL_JOLT,
     COL_MODE,
     COL_T,
     COL_V,
     COL_Y,
     COL_YD,
-    COMPENSATION,
     HEAVE,
     MAD_TO_STD,
     NCOL,
     ROLL,
     CfarBackground,
     FloatArray,
+    FrameFit,
     Ring,
     TemplateGrid,
     Whitener,
+    background_sigma,
     channels_on_grid,
     template_grid,
     whiten_templates,
 )
 from roadpreview.configtools import check_ranges
 from roadpreview.types import FusionMode, Side, SuppressionReason
-
-
-@dataclass(frozen=True)
-class TwoAxleRun:
-    """A whole trajectory through the detector: per-frame arrays and all events."""
-
-    t: FloatArray  #: frame times, s
-    score: FloatArray  #: z per frame (NaN while undefined)
-    t_score: FloatArray  #: the crossing time each score hypothesises, s
-    height_m: FloatArray  #: the best fit's road input, m
-    background_m: FloatArray  #: its background, m
-    suppressed: NDArray[np.int64]
-    events: list[AnomalyEvent]
-
-    @property
-    def alerts(self) -> list[AnomalyEvent]:
-        """The confirmed events that raise (or confirm) an alert."""
-        return [e for e in self.events if not e.suppressed and e.kind is EventKind.CONFIRMED]
-
-    @property
-    def provisional(self) -> list[AnomalyEvent]:
-        """The provisional events that raise an alert."""
-        return [e for e in self.events if not e.suppressed and e.kind is EventKind.PROVISIONAL]
-
 
 #: the two-axle lag is rounded to this for the template cache, s (3 % of a 0.17 s lag at
 #: 60 km/h: well inside the bank's duration steps)
@@ -133,85 +117,6 @@ _MAX_FPS = 120.0
 _REMEASURE_FRAMES = 30
 #: the range rate (a slope over a second) is re-fitted every this many frames
 _RANGE_RATE_EVERY = 5
-
-
-class _ExcursionPicker:
-    """One event per excursion above the threshold, at a fixed delay: the first eligible
-    frame opens it, the best score within ``window_s`` describes it, and it is confirmed
-    ``window_s`` after it opened (a bounded latency: `TwoAxleDetector._refine` then
-    settles its alignment on the frames seen since)."""
-
-    def __init__(self, window_s: float) -> None:
-        self.window_s = window_s
-        self._cand: tuple[float, float, tuple[AnomalyEvent, _Hypothesis]] | None = None
-
-    def due(self, t: float) -> list[tuple[AnomalyEvent, _Hypothesis]]:
-        """The excursion confirmed at ``t`` (its window has passed), if any."""
-        if self._cand is not None and t - self._cand[0] >= self.window_s - 1e-9:
-            out = [self._cand[2]]
-            self._cand = None
-            return out
-        return []
-
-    def offer(
-        self, t: float, value: float, describe: Callable[[], tuple[AnomalyEvent, _Hypothesis]]
-    ) -> None:
-        """A frame's score (-inf: not eligible): opens an excursion or may improve it."""
-        if math.isfinite(value):
-            if self._cand is None:
-                self._cand = (t, value, describe())
-            elif value > self._cand[1]:
-                self._cand = (self._cand[0], value, describe())
-
-    def flush(self) -> list[tuple[AnomalyEvent, _Hypothesis]]:
-        if self._cand is None:
-            return []
-        out = [self._cand[2]]
-        self._cand = None
-        return out
-
-
-@dataclass(frozen=True)
-class _Hypothesis:
-    """What a candidate event was fitted with, for refining it when it is confirmed."""
-
-    center_s: float  #: centre of the anomaly's pulse under the front axle, s
-    tau_s: float  #: the two-axle lag, s (NaN: unknown)
-    channel: int  #: HEAVE or ROLL
-    noise_m: float  #: the background std of the amplitude, m (NaN: not metric)
-    focal_px: float
-
-
-@dataclass
-class _Fit:
-    """The fits of one frame: per channel and duration."""
-
-    amplitude: FloatArray  #: (3, J) road input, m (px per template unit without focal/d)
-    sigma_fit: FloatArray  #: (J,) white-noise std of the amplitude for 1 px of noise, m
-    t_cross: FloatArray  #: (J,) hypothesised front-axle crossing times, s
-    valid_fraction: FloatArray  #: (J,) share of valid frames in each window
-    n_valid: FloatArray  #: (J,) valid frames in each window
-    metric: bool  #: amplitudes are in metres (focal and distance known)
-    #: (2, J) whitened template energies of the heave and roll channels, px² per m²: the
-    #: amplitude's std is the innovations' std / sqrt(energy)
-    energy: FloatArray = field(default_factory=lambda: np.empty((2, 0)))
-    innovation: FloatArray = field(default_factory=lambda: np.full(2, np.nan))  #: newest, px
-    #: the early fit (`TwoAxleConfig.provisional`): (3, J) amplitudes, m, as ``amplitude``;
-    #: (2, J) whitened energies; (J,) unwhitened std per px; (J,) hypothesised pulse centres
-    early_amplitude: FloatArray | None = None
-    early_energy: FloatArray = field(default_factory=lambda: np.empty((2, 0)))
-    early_sigma_fit: FloatArray = field(default_factory=lambda: np.empty(0))
-    early_centre: FloatArray = field(default_factory=lambda: np.empty(0))
-
-
-@dataclass
-class _Pending:
-    """A provisional event waiting for the two-axle fit to confirm or cancel it."""
-
-    ref: int  #: its number
-    event: AnomalyEvent
-    check_t: float  #: by then the two-axle fit must have an excursion for it open, s
-    due_t: float  #: by then it must be confirmed, s
 
 
 class TwoAxleDetector(LastFrame):
@@ -239,7 +144,7 @@ class TwoAxleDetector(LastFrame):
         self._early_whitened: dict[
             tuple[float, float, int, int], tuple[FloatArray, FloatArray]
         ] = {}
-        self._pending: list[_Pending] = []
+        self._pending: list[Pending] = []
         self._provisionals = 0  # provisional events numbered so far
         self._last_early_t = -math.inf  # crossing of the last provisional event, s
         self._early_stands = False  # it was not cancelled
@@ -277,8 +182,8 @@ class TwoAxleDetector(LastFrame):
             capacity=math.ceil(cfg.background_s * _MAX_FPS),
         )
 
-    def _new_picker(self) -> _ExcursionPicker:
-        return _ExcursionPicker(self.config.peak_window_s)
+    def _new_picker(self) -> ExcursionPicker:
+        return ExcursionPicker(self.config.peak_window_s)
 
     @property
     def background_m(self) -> FloatArray:
@@ -362,7 +267,7 @@ class TwoAxleDetector(LastFrame):
 
     # -- provisional events ----------------------------------------------------------------
     def _early(
-        self, t: float, fit: _Fit, suppressed: SuppressionReason, *, learning: bool
+        self, t: float, fit: FrameFit, suppressed: SuppressionReason, *, learning: bool
     ) -> list[AnomalyEvent]:
         """The early fit's score at this frame; a PROVISIONAL event when it is over
         ``provisional_threshold_z`` and the floor, away from the anomalies reported."""
@@ -393,7 +298,7 @@ class TwoAxleDetector(LastFrame):
         ):
             return []
         a_h, a_r = float(amp[HEAVE, j]), float(amp[ROLL, j])
-        early = _Fit(
+        early = FrameFit(
             amplitude=amp,
             sigma_fit=fit.early_sigma_fit,
             t_cross=fit.early_centre,
@@ -406,42 +311,19 @@ class TwoAxleDetector(LastFrame):
             return []
         self._last_early_t = centre
         self._early_stands = True
-        rows = self._ring.last(cfg.buffer_frames)
-        i = int(np.clip(np.searchsorted(rows[:, COL_T], centre), 0, rows.shape[0] - 1))
-        d = rows[:, COL_D]
-        known = np.flatnonzero(np.isfinite(d))
-        distance = dstd = math.nan
-        if known.size:
-            i_d = int(known[np.argmin(np.abs(known - i))])
-            distance, dstd = float(d[i_d]), float(rows[i_d, COL_DSTD])
-        speed = float(rows[i, COL_V])
-        v = cfg.vehicle
         self._provisionals += 1
-        a, b = cfg.provisional_confidence_logit
-        x = a + b * math.log(max(score, 1e-9) / cfg.provisional_threshold_z)
-        event = AnomalyEvent(
-            t_s=centre,
-            t_peak_s=t,
-            t_emit_s=t,
-            s_px=math.nan,
-            s_left_px=math.nan,
-            s_right_px=math.nan,
-            threshold_px=math.nan,
+        rows = self._ring.last(cfg.buffer_frames)
+        event = provisional_event(
+            cfg,
+            rows,
+            t=t,
+            centre=centre,
             side=side if math.isfinite(a_r) else Side.UNKNOWN,
-            lead_distance_m=distance,
-            lead_distance_std_m=dstd,
-            ego_speed_mps=speed if math.isfinite(speed) else None,
-            mode=FusionMode(int(rows[i, COL_MODE])),
-            valid_fraction=1.0,
-            suppressed=suppressed,
-            score=score,
-            threshold=cfg.provisional_threshold_z,
             height_m=height,
-            height_std_m=float(sig[c, j]),
+            score=score,
+            std_m=float(sig[c, j]),
+            suppressed=suppressed,
             lead_speed_mps=self._lead_speed(rows),
-            anomaly_distance_m=distance + v.rear_overhang_m + v.wheelbase_m,
-            confidence=1.0 / (1.0 + math.exp(-min(max(x, -50.0), 50.0))),
-            kind=EventKind.PROVISIONAL,
             ref=self._provisionals,
         )
         if not suppressed:
@@ -450,7 +332,7 @@ class TwoAxleDetector(LastFrame):
             half = 0.5 * float(self._durations[-1])
             check = centre + tau + half + cfg.post_s + cfg.provisional_check_s
             self._pending.append(
-                _Pending(self._provisionals, event, check, check + cfg.peak_window_s)
+                Pending(self._provisionals, event, check, check + cfg.peak_window_s)
             )
         return [event]
 
@@ -459,17 +341,11 @@ class TwoAxleDetector(LastFrame):
         cand = self._picker._cand
         return cand is not None and abs(cand[2][0].t_s - centre) <= self.config.provisional_match_s
 
-    def _early_sigma(self, fit: _Fit, amp: FloatArray, *, learning: bool) -> FloatArray:
+    def _early_sigma(self, fit: FrameFit, amp: FloatArray, *, learning: bool) -> FloatArray:
         """As `_sigma`, for the early fit (its own background level)."""
-        cfg = self.config
         white = self._innovation_std[:, None] / np.sqrt(fit.early_energy)
         level = 1.0 if learning else self._early_background.level()
-        sig = np.maximum(white * level, cfg.tracking_noise_px * fit.early_sigma_fit)
-        comp = cfg.compensation_error_fraction * np.abs(amp[COMPENSATION])
-        sig[HEAVE] = np.hypot(sig[HEAVE], np.where(np.isfinite(comp), comp, 0.0))
-        leak = cfg.roll_leak_fraction * np.abs(amp[HEAVE])
-        sig[ROLL] = np.hypot(sig[ROLL], np.where(np.isfinite(leak), leak, 0.0))
-        return np.asarray(sig)
+        return background_sigma(self.config, white, level, fit.early_sigma_fit, amp)
 
     def _cancel_due(self, t: float) -> list[AnomalyEvent]:
         """Provisional events the two-axle fit did not confirm: at their check no excursion
@@ -484,7 +360,7 @@ class TwoAxleDetector(LastFrame):
         self._pending = keep
         return out
 
-    def _cancelled(self, p: _Pending, t: float) -> AnomalyEvent:
+    def _cancelled(self, p: Pending, t: float) -> AnomalyEvent:
         if p.event.t_s == self._last_early_t:
             self._early_stands = False
         return replace(p.event, t_emit_s=t, kind=EventKind.CANCELLED)
@@ -554,7 +430,7 @@ class TwoAxleDetector(LastFrame):
         rate = self._range_rate if math.isfinite(self._range_rate) else 0.0
         return float(v_ego + rate)
 
-    def _fit(self, t: float, sample: TrajectorySample) -> _Fit | None:
+    def _fit(self, t: float, sample: TrajectorySample) -> FrameFit | None:
         """Least-squares fits of every duration's template on each channel, prewhitened
         (None: no fit possible at this frame: too little history, a lead standing still,
         a gap in the window longer than ``max_gap_s``).
@@ -613,7 +489,7 @@ class TwoAxleDetector(LastFrame):
             if c < 2:
                 energy[c] = ss
                 innovation[c] = xw[-1]
-        result = _Fit(
+        result = FrameFit(
             amplitude=amp / scale,
             sigma_fit=1.0 / (np.sqrt(grid.ss_raw) * abs(scale)),
             t_cross=t - lag,
@@ -628,7 +504,7 @@ class TwoAxleDetector(LastFrame):
         return result
 
     def _fit_early(
-        self, fit: _Fit, x: FloatArray, t: float, tau: float, dt: float, scale: float
+        self, fit: FrameFit, x: FloatArray, t: float, tau: float, dt: float, scale: float
     ) -> None:
         """The early fit into ``fit``: every duration's two-axle template cut
         ``provisional_lag_s`` after the front axle met the anomaly's middle, fitted to the
@@ -712,24 +588,17 @@ class TwoAxleDetector(LastFrame):
             store[key] = hit
         return hit
 
-    def _sigma(self, fit: _Fit, *, learning: bool = False) -> FloatArray:
+    def _sigma(self, fit: FrameFit, *, learning: bool = False) -> FloatArray:
         """The background std of each amplitude (2, J): the running level, the tracking
         noise at this distance and the floor, and for the heave channel the compensation's
         share."""
-        cfg = self.config
         # the white-noise std of each amplitude, times the background's measured departure
         # from it (CFAR); never below the tracking noise carried through an unwhitened fit
         white = self._innovation_std[:, None] / np.sqrt(fit.energy)
         level = 1.0 if learning else self._background.level()
-        sig = np.maximum(white * level, cfg.tracking_noise_px * fit.sigma_fit)
-        comp = cfg.compensation_error_fraction * np.abs(fit.amplitude[COMPENSATION])
-        sig[HEAVE] = np.hypot(sig[HEAVE], np.where(np.isfinite(comp), comp, 0.0))
-        # the halves never move quite alike: a share of the heave leaks into the roll channel
-        leak = cfg.roll_leak_fraction * np.abs(fit.amplitude[HEAVE])
-        sig[ROLL] = np.hypot(sig[ROLL], np.where(np.isfinite(leak), leak, 0.0))
-        return np.asarray(sig)
+        return background_sigma(self.config, white, level, fit.sigma_fit, fit.amplitude)
 
-    def _update_background(self, t: float, fit: _Fit, score: float) -> None:
+    def _update_background(self, t: float, fit: FrameFit, score: float) -> None:
         """A frame that may count as background: its amplitudes feed the running level, its
         channels' differences the whitening filters (both refreshed together)."""
         cfg = self.config
@@ -778,7 +647,7 @@ class TwoAxleDetector(LastFrame):
         ego = ego[np.isfinite(ego)]
         self._ego_level = float(np.median(ego)) if ego.size >= 10 else math.nan
 
-    def _event_height(self, fit: _Fit, j: int) -> tuple[float, Side, float]:
+    def _event_height(self, fit: FrameFit, j: int) -> tuple[float, Side, float]:
         """|height|, side and signed height of the anomaly at duration ``j``."""
         a_h = float(fit.amplitude[HEAVE, j])
         a_r = float(fit.amplitude[ROLL, j])
@@ -795,7 +664,7 @@ class TwoAxleDetector(LastFrame):
     def _describe(
         self,
         t: float,
-        fit: _Fit,
+        fit: FrameFit,
         sigma: FloatArray,
         c: int,
         j: int,
@@ -805,17 +674,9 @@ class TwoAxleDetector(LastFrame):
         cfg = self.config
         _, side, height = self._event_height(fit, j)
         rows = self._ring.last(cfg.buffer_frames)
-        times = rows[:, COL_T]
         # the front axle over the anomaly's middle (its pulse's centre)
         t_cross = float(fit.t_cross[j]) + 0.5 * float(self._durations[j])
-        i = int(np.clip(np.searchsorted(times, t_cross), 0, len(times) - 1))
-        d = rows[:, COL_D]
-        known = np.flatnonzero(np.isfinite(d))
-        if known.size:
-            i_d = int(known[np.argmin(np.abs(known - i))])
-            distance, distance_std = float(d[i_d]), float(rows[i_d, COL_DSTD])
-        else:
-            distance, distance_std = math.nan, math.nan
+        i, distance, distance_std = lead_at(rows, t_cross)
         speed = float(rows[i, COL_V])
         v_lead = self._lead_speed(rows)
         if not fit.metric:
@@ -873,91 +734,18 @@ class TwoAxleDetector(LastFrame):
         d = rows[np.isfinite(rows[:, COL_D]), COL_D]
         if x is None or not d.size:
             return event
-        grid_t = t_now - dt * np.arange(n - 1, -1, -1)
-        shifts = np.arange(-search, search + 0.5 * dt, dt)
-        centers = hyp.center_s + shifts  # (K,)
-        starts = centers[:, None] - 0.5 * dur[None, :]  # (K, J)
-        rel = grid_t[None, None, :] - starts[:, :, None]  # (K, J, n)
-        k_n, j_n = starts.shape
-        s = self.bank.two_axle(rel.reshape(k_n * j_n, n), hyp.tau_s, cfg.vehicle.rho, rows=j_n)
-        s *= -hyp.focal_px / float(np.median(d))
-        # per channel: the whitened fit's correlation and energy at every (alignment,
-        # duration), weighted by the channel's white-noise variance (the roll channel's
-        # widened by the heave's leak)
-        corr, energy_c = [], []
-        sd = self._innovation_std
-        weights = (
-            1.0 / sd[HEAVE] ** 2,
-            1.0 / (sd[ROLL] ** 2 + (cfg.roll_leak_fraction * sd[HEAVE]) ** 2),
-        )
-        for c in (HEAVE, ROLL):
-            xc = x[:, c]
-            if not np.isfinite(xc).all() or not math.isfinite(weights[c]):
-                corr.append(np.zeros(k_n * j_n))
-                energy_c.append(np.zeros(k_n * j_n))
-                continue
-            w = self._whiteners[c]
-            sw = w.apply(s)
-            s_r = sw - sw.mean(axis=1, keepdims=True)
-            xw = w.apply(xc)
-            corr.append(weights[c] * (s_r @ (xw - xw.mean())))
-            energy_c.append(weights[c] * (s_r * s_r).sum(axis=1))
-        # the GLRT of each side hypothesis: the channels' amplitudes are (h, 0) for both
-        # sides, (h / 2, h) for the left, (h / 2, -h) for the right
-        sides: tuple[tuple[Side, float, float], ...] = (
-            (Side.BOTH, 1.0, 0.0),
-            (Side.LEFT, 0.5, 1.0),
-            (Side.RIGHT, 0.5, -1.0),
-        )
-        if not (energy_c[ROLL] > 0).any():
-            sides = ((Side.BOTH, 1.0, 0.0),)
-        # the detection's crossing as a prior (a Gaussian of std ``refine_prior_s`` on the
-        # shift, in the fit's chi-square units): a side lobe half a body period off, of the
-        # opposite sign, takes the crossing (and the height's sign) only when it fits
-        # decisively better, not by a hair that the libraries' last bits decide
-        penalty = np.repeat((shifts / cfg.refine_prior_s) ** 2, j_n)
-        best_e, best_side, amp, energy = -math.inf, event.side, np.zeros(1), np.zeros(1)
-        for side, u_h, u_r in sides:
-            num = u_h * corr[HEAVE] + u_r * corr[ROLL]
-            den = u_h * u_h * energy_c[HEAVE] + u_r * u_r * energy_c[ROLL]
-            with np.errstate(invalid="ignore", divide="ignore"):
-                a = num / np.where(den > 0, den, np.nan)
-                e = a * num - penalty
-            if np.isfinite(e).any() and float(np.nanmax(e)) > best_e:
-                best_e, best_side, amp, energy = float(np.nanmax(e)), side, a, e
-        if not math.isfinite(best_e) or float(np.nanmax(energy + penalty)) <= 0:
-            return event
-        e2 = energy.reshape(k_n, j_n)
-        a2 = amp.reshape(k_n, j_n)
-        k, best = np.unravel_index(int(np.nanargmax(e2)), e2.shape)
-        # every (alignment, duration) that fits almost as well bounds the height: its
-        # posterior within (1 - close_fit_fraction) of the best's fit energy of the best's
-        fit_best = float(e2[k, best] + penalty.reshape(k_n, j_n)[k, best])
-        close = np.isfinite(e2) & (e2 >= e2[k, best] - (1.0 - cfg.close_fit_fraction) * fit_best)
-        spread = float(np.std(a2[close])) if np.count_nonzero(close) > 1 else 0.0
-        height = float(a2[k, best])
-        length = math.nan
-        if best > 0 and not close[:, 0].any() and math.isfinite(event.lead_speed_mps):
-            length = event.lead_speed_mps * float(dur[best])
-        t_cross = float(centers[k])
-        # the lead's distance at the refined crossing (nearest frame that has one)
-        times = rows[:, COL_T]
-        known = np.flatnonzero(np.isfinite(rows[:, COL_D]))
-        i = int(known[np.argmin(np.abs(times[known] - t_cross))])
-        distance = float(rows[i, COL_D])
-        v = cfg.vehicle
-        if event.side is Side.UNKNOWN:
-            best_side = Side.UNKNOWN  # no halves: the side stays unknown
-        return replace(
+        return refine_event(
             event,
-            t_s=t_cross,
-            side=best_side,
-            height_m=height,
-            height_std_m=math.hypot(hyp.noise_m, spread),
-            length_m=length,
-            lead_distance_m=distance,
-            lead_distance_std_m=float(rows[i, COL_DSTD]),
-            anomaly_distance_m=distance + v.rear_overhang_m + v.wheelbase_m,
+            hyp,
+            cfg=cfg,
+            bank=self.bank,
+            durations=dur,
+            rows=rows,
+            x=x,
+            d=d,
+            dt=dt,
+            innovation_std=self._innovation_std,
+            whiteners=self._whiteners,
         )
 
     def confidence(self, score: float) -> float:

@@ -10,7 +10,7 @@ background, the caches) and passes what each step needs.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -319,3 +319,45 @@ def jolt_mask(rows: FloatArray, cfg: TwoAxleConfig, ego_level: float) -> NDArray
     for tj in times[hit]:  # a handful of jolt frames per window
         out |= (times >= tj - before) & (times <= tj + after)
     return out
+
+
+@dataclass
+class FrameFit:
+    """The fits of one frame: per channel and duration."""
+
+    amplitude: FloatArray  #: (3, J) road input, m (px per template unit without focal/d)
+    sigma_fit: FloatArray  #: (J,) white-noise std of the amplitude for 1 px of noise, m
+    t_cross: FloatArray  #: (J,) hypothesised front-axle crossing times, s
+    valid_fraction: FloatArray  #: (J,) share of valid frames in each window
+    n_valid: FloatArray  #: (J,) valid frames in each window
+    metric: bool  #: amplitudes are in metres (focal and distance known)
+    #: (2, J) whitened template energies of the heave and roll channels, px² per m²: the
+    #: amplitude's std is the innovations' std / sqrt(energy)
+    energy: FloatArray = field(default_factory=lambda: np.empty((2, 0)))
+    innovation: FloatArray = field(default_factory=lambda: np.full(2, np.nan))  #: newest, px
+    #: the early fit (`TwoAxleConfig.provisional`): (3, J) amplitudes, m, as ``amplitude``;
+    #: (2, J) whitened energies; (J,) unwhitened std per px; (J,) hypothesised pulse centres
+    early_amplitude: FloatArray | None = None
+    early_energy: FloatArray = field(default_factory=lambda: np.empty((2, 0)))
+    early_sigma_fit: FloatArray = field(default_factory=lambda: np.empty(0))
+    early_centre: FloatArray = field(default_factory=lambda: np.empty(0))
+
+
+def background_sigma(
+    cfg: TwoAxleConfig,
+    white: FloatArray,
+    level: FloatArray | float,
+    sigma_fit: FloatArray,
+    amplitude: FloatArray,
+) -> FloatArray:
+    """The background std of each amplitude (2, J): the white-noise std ``white`` times the
+    background's level (CFAR), never below the tracking noise carried through an
+    unwhitened fit (``sigma_fit`` per px); the heave channel widened by the compensation's
+    share of ``amplitude`` (its third row), the roll channel by the heave's leak (the halves
+    never move quite alike)."""
+    sig = np.maximum(white * level, cfg.tracking_noise_px * sigma_fit)
+    comp = cfg.compensation_error_fraction * np.abs(amplitude[COMPENSATION])
+    sig[HEAVE] = np.hypot(sig[HEAVE], np.where(np.isfinite(comp), comp, 0.0))
+    leak = cfg.roll_leak_fraction * np.abs(amplitude[HEAVE])
+    sig[ROLL] = np.hypot(sig[ROLL], np.where(np.isfinite(leak), leak, 0.0))
+    return np.asarray(sig)

@@ -121,9 +121,9 @@ def _preview_table(result: Any, cfg: Any, rec_dir: Path) -> str:
     import json
     import math
 
+    from roadpreview.eval.road_truth import at_anomalies, drive_for_scenario
     from roadpreview.pipeline.config import PipelineConfig
     from roadpreview.preview import ProfileEstimator
-    from roadpreview.preview.truth import at_anomalies, drive_for_scenario
 
     frames = result.results or []
     sent = [r.preview for r in frames if r.preview is not None]

@@ -2,7 +2,7 @@
 
 The product method's stored trajectory goes through `roadpreview.preview.ProfileEstimator`
 exactly as inside the pipeline (restarted where the tracker changed target); every preview
-is compared with the true road of its drive (`roadpreview.preview.truth.compare`: the bins
+is compared with the true road of its drive (`roadpreview.eval.road_truth.compare`: the bins
 whose spot the lead's wheels passed within the last `RECENT_S`, each side's least-squares
 line removed as the preview's). Per drive: the RMS height error, the true road's RMS at
 the same bins (the error's scale), the bins compared and the correlation of the ego's
@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roadpreview.eval.experiments.base import jf as _f
+from roadpreview.eval.road_truth import compare, drive_for_scenario
 from roadpreview.preview import ProfileEstimator
-from roadpreview.preview.truth import compare, drive_for_scenario
 from roadpreview.types import Alert, RoadPreview
 
 if TYPE_CHECKING:

@@ -15,8 +15,9 @@
 * **Ego confirmation**: the outcomes against the truth.
 * **Generalization suite**: per drive (never used for tuning): false alarms per minute,
   recall, mode changes per minute, the road class estimate.
-* **Alert timing and provisional alerts** (`roadpreview.eval.provisional`).
-* **Road preview**: ``RP_PREVIEW`` against the true road (`roadpreview.eval.preview`).
+* **Alert timing and provisional alerts** (`roadpreview.eval.provisional`) and the **road
+  preview** against the true road (`roadpreview.eval.preview`): added to E6 by
+  `roadpreview.eval.suite.run_experiments`.
 
 Alerts are matched to the truth as in ``roadpreview replay --truth``
 (`roadpreview.pipeline.truthmatch`).
@@ -604,15 +605,7 @@ def e6_product(data: EvalData) -> dict[str, Any]:
         "road_class": {"wild": road_classes(data, "wild", ref)},
     }
     if data.product_detector == "two-axle":
-        from roadpreview.eval.provisional import provisional_points
-
         out["calibration"] = calibration(data, ref)
-        if data.methods.configs[ref].anomaly.two_axle.provisional:
-            out["provisional"] = provisional_points(data)
-    if data.methods.configs[ref].preview.enabled:
-        from roadpreview.eval.preview import preview_errors
-
-        out["preview"] = preview_errors(data)
     if data.jobs.get("generalization"):
         gen_rows = matched_alerts(data, "generalization", ref)
         out["height"]["generalization"] = height_errors(gen_rows)

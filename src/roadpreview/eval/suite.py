@@ -30,7 +30,9 @@ from roadpreview.eval.experiments.budget import e7_budget
 from roadpreview.eval.methods import METHODS, REFERENCE_METHOD, select_methods
 from roadpreview.eval.metrics import require_sklearn
 from roadpreview.eval.plan import EXPERIMENTS, EvalPlan
+from roadpreview.eval.preview import preview_errors
 from roadpreview.eval.product import e6_product
+from roadpreview.eval.provisional import provisional_points
 from roadpreview.eval.runner import MethodSet, RecordingOutcome, process_all
 from roadpreview.fusion import BACKENDS
 from roadpreview.pipeline.config import PipelineConfig
@@ -196,6 +198,11 @@ def run_experiments(
         }
     if "e6" in experiments:
         e6 = e6_product(data)
+        ref = data.methods.configs[data.methods.reference]
+        if data.product_detector == "two-axle" and ref.anomaly.two_axle.provisional:
+            e6["provisional"] = provisional_points(data)
+        if ref.preview.enabled:
+            e6["preview"] = preview_errors(data)
         if "calibration" in e6:
             e6["reliability_figure"] = figures.plot_reliability(
                 e6["calibration"], fig_dir / "e6_reliability.png"

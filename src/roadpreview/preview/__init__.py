@@ -25,61 +25,20 @@ response, τ = wheelbase / v_lead. Every ``period_s`` `ProfileEstimator`:
 5. removes the least-squares line over the valid bins: the level and the grade are in the
    drift's span and cannot be observed; heights are relative to that local plane.
 
-Left / right tracks: heave ± roll / 2 (the detector's convention). `roadpreview.preview.truth`
+Left / right tracks: heave ± roll / 2 (the detector's convention). `roadpreview.eval.road_truth`
 compares previews with the simulator's road. ``docs/method.md``, "The road-profile preview".
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from roadpreview.preview.config import PreviewConfig
 from roadpreview.preview.profile import FaceOperator, ProfileEstimator, face_operator
 from roadpreview.types import RoadPreview
 
-if TYPE_CHECKING:  # (typed as they are; imported on first use below)
-    from roadpreview.preview.truth import (
-        AnomalyInPreview,
-        PreviewError,
-        accel_correlation,
-        at_anomalies,
-        compare,
-        drive_for_scenario,
-        true_heights,
-    )
-
-#: `roadpreview.preview.truth` needs the simulator: imported lazily (math packages do not
-#: import `roadpreview.sim` on import)
-_TRUTH = (
-    "AnomalyInPreview",
-    "PreviewError",
-    "accel_correlation",
-    "at_anomalies",
-    "compare",
-    "drive_for_scenario",
-    "true_heights",
-)
-
-
-def __getattr__(name: str) -> object:
-    if name in _TRUTH:
-        from roadpreview.preview import truth
-
-        return getattr(truth, name)
-    raise AttributeError(f"module 'roadpreview.preview' has no attribute {name!r}")
-
-
 __all__ = [
-    "AnomalyInPreview",
     "FaceOperator",
     "PreviewConfig",
-    "PreviewError",
     "ProfileEstimator",
     "RoadPreview",
-    "accel_correlation",
-    "at_anomalies",
-    "compare",
-    "drive_for_scenario",
     "face_operator",
-    "true_heights",
 ]
