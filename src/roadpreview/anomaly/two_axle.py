@@ -74,8 +74,8 @@ from roadpreview.anomaly.two_axle_events import (
     ExcursionPicker,
     Pending,
     TwoAxleRun,
-    lead_at,
-    provisional_event,
+    calibrated,
+    fitted_event,
 )
 from roadpreview.anomaly.two_axle_refine import Hypothesis as _Hypothesis
 from roadpreview.anomaly.two_axle_refine import refine_event
@@ -83,7 +83,6 @@ from roadpreview.anomaly.two_axle_signal import (
     AR_ORDER,
     COL_D,
     COL_JOLT,
-    COL_MODE,
     COL_T,
     COL_V,
     COL_Y,
@@ -104,7 +103,7 @@ from roadpreview.anomaly.two_axle_signal import (
     whiten_templates,
 )
 from roadpreview.configtools import check_ranges
-from roadpreview.types import FusionMode, Side, SuppressionReason
+from roadpreview.types import Side, SuppressionReason
 
 #: the two-axle lag is rounded to this for the template cache, s (3 % of a 0.17 s lag at
 #: 60 km/h: well inside the bank's duration steps)
@@ -248,7 +247,10 @@ class TwoAxleDetector(LastFrame):
         t_cross = float(fit.t_cross[j]) + 0.5 * float(self._durations[j])  # the pulse's middle
         eligible = (
             score >= threshold
-            and (not fit.metric or self._event_height(fit, int(j))[0] >= cfg.min_height_mm * 1e-3)
+            and (
+                not fit.metric
+                or self._event_height(fit.amplitude, int(j))[0] >= cfg.min_height_mm * 1e-3
+            )
             # the ringing of an anomaly already reported is no new anomaly
             and not -cfg.refractory_s[0] <= t_cross - self._last_cross_t <= cfg.refractory_s[1]
         )
@@ -298,32 +300,30 @@ class TwoAxleDetector(LastFrame):
         ):
             return []
         a_h, a_r = float(amp[HEAVE, j]), float(amp[ROLL, j])
-        early = FrameFit(
-            amplitude=amp,
-            sigma_fit=fit.early_sigma_fit,
-            t_cross=fit.early_centre,
-            valid_fraction=np.ones_like(fit.early_centre),
-            n_valid=fit.n_valid,
-            metric=True,
-        )
-        size, side, height = self._event_height(early, int(j))
+        size, side, height = self._event_height(amp, int(j))
         if size < cfg.min_height_mm * 1e-3 or not (math.isfinite(a_h) or math.isfinite(a_r)):
             return []
         self._last_early_t = centre
         self._early_stands = True
         self._provisionals += 1
         rows = self._ring.last(cfg.buffer_frames)
-        event = provisional_event(
+        event = fitted_event(
             cfg,
             rows,
             t=t,
             centre=centre,
             side=side if math.isfinite(a_r) else Side.UNKNOWN,
             height_m=height,
-            score=score,
             std_m=float(sig[c, j]),
+            score=score,
+            threshold=cfg.provisional_threshold_z,
+            confidence=calibrated(
+                cfg.provisional_confidence_logit, score, cfg.provisional_threshold_z
+            ),
             suppressed=suppressed,
             lead_speed_mps=self._lead_speed(rows),
+            t_emit_s=t,
+            kind=EventKind.PROVISIONAL,
             ref=self._provisionals,
         )
         if not suppressed:
@@ -647,10 +647,11 @@ class TwoAxleDetector(LastFrame):
         ego = ego[np.isfinite(ego)]
         self._ego_level = float(np.median(ego)) if ego.size >= 10 else math.nan
 
-    def _event_height(self, fit: FrameFit, j: int) -> tuple[float, Side, float]:
-        """|height|, side and signed height of the anomaly at duration ``j``."""
-        a_h = float(fit.amplitude[HEAVE, j])
-        a_r = float(fit.amplitude[ROLL, j])
+    def _event_height(self, amplitude: FloatArray, j: int) -> tuple[float, Side, float]:
+        """|height|, side and signed height of the anomaly at duration ``j`` of a fit's
+        amplitudes (heave, roll, ...)."""
+        a_h = float(amplitude[HEAVE, j])
+        a_r = float(amplitude[ROLL, j])
         if not math.isfinite(a_r):
             return abs(a_h), Side.UNKNOWN, a_h
         if not math.isfinite(a_h) or abs(a_r) < self.config.one_sided_ratio * abs(a_h):
@@ -672,37 +673,26 @@ class TwoAxleDetector(LastFrame):
         suppressed: SuppressionReason,
     ) -> tuple[AnomalyEvent, _Hypothesis]:
         cfg = self.config
-        _, side, height = self._event_height(fit, j)
+        _, side, height = self._event_height(fit.amplitude, j)
         rows = self._ring.last(cfg.buffer_frames)
         # the front axle over the anomaly's middle (its pulse's centre)
         t_cross = float(fit.t_cross[j]) + 0.5 * float(self._durations[j])
-        i, distance, distance_std = lead_at(rows, t_cross)
-        speed = float(rows[i, COL_V])
-        v_lead = self._lead_speed(rows)
         if not fit.metric:
             height = math.nan
-        return AnomalyEvent(
-            t_s=t_cross,
-            t_peak_s=t,
-            t_emit_s=math.nan,
-            s_px=math.nan,
-            s_left_px=math.nan,
-            s_right_px=math.nan,
-            threshold_px=math.nan,
+        return fitted_event(
+            cfg,
+            rows,
+            t=t,
+            centre=t_cross,
             side=side,
-            lead_distance_m=distance,
-            lead_distance_std_m=distance_std,
-            ego_speed_mps=speed if math.isfinite(speed) else None,
-            mode=FusionMode(int(rows[i, COL_MODE])),
-            valid_fraction=float(fit.valid_fraction[j]),
-            suppressed=suppressed,
+            height_m=height,
+            std_m=float(sigma[c, j]) if fit.metric else math.nan,
             score=score,
             threshold=cfg.threshold_z,
-            height_m=height,
-            height_std_m=float(sigma[c, j]) if fit.metric else math.nan,
-            lead_speed_mps=v_lead,
-            anomaly_distance_m=distance + cfg.vehicle.rear_overhang_m + cfg.vehicle.wheelbase_m,
             confidence=self.confidence(score),
+            suppressed=suppressed,
+            lead_speed_mps=self._lead_speed(rows),
+            valid_fraction=float(fit.valid_fraction[j]),
         ), _Hypothesis(
             center_s=t_cross,
             tau_s=self._tau,
@@ -750,9 +740,7 @@ class TwoAxleDetector(LastFrame):
 
     def confidence(self, score: float) -> float:
         """The calibrated probability that an event of this score is real."""
-        a, b = self.config.confidence_logit
-        x = a + b * math.log(max(score, 1e-9) / self.config.threshold_z)
-        return 1.0 / (1.0 + math.exp(-min(max(x, -50.0), 50.0)))
+        return calibrated(self.config.confidence_logit, score, self.config.threshold_z)
 
     # -- stream control ------------------------------------------------------------------
     def restart(self) -> list[AnomalyEvent]:

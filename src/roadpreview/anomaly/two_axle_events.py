@@ -100,7 +100,15 @@ def lead_at(rows: FloatArray, t: float) -> tuple[int, float, float]:
     return i, float(d[i_d]), float(rows[i_d, COL_DSTD])
 
 
-def provisional_event(
+def calibrated(logit: tuple[float, float], score: float, threshold: float) -> float:
+    """The probability 1 / (1 + exp(-(a + b ln(score / threshold)))) of a logistic
+    calibration ``logit`` = (a, b) (the two-axle fit's and the early fit's)."""
+    a, b = logit
+    x = a + b * math.log(max(score, 1e-9) / threshold)
+    return 1.0 / (1.0 + math.exp(-min(max(x, -50.0), 50.0)))
+
+
+def fitted_event(
     cfg: TwoAxleConfig,
     rows: FloatArray,
     *,
@@ -108,24 +116,27 @@ def provisional_event(
     centre: float,
     side: Side,
     height_m: float,
-    score: float,
     std_m: float,
+    score: float,
+    threshold: float,
+    confidence: float,
     suppressed: SuppressionReason,
     lead_speed_mps: float,
-    ref: int,
+    t_emit_s: float = math.nan,
+    valid_fraction: float = 1.0,
+    kind: EventKind = EventKind.CONFIRMED,
+    ref: int = 0,
 ) -> AnomalyEvent:
-    """The PROVISIONAL event of an early fit that crossed its threshold at ``t`` for the
-    crossing ``centre``: the lead's distance, the ego's speed and the mode there, its
-    calibrated confidence (``provisional_confidence_logit``)."""
+    """The event of a fit (the two-axle fit's candidate, or the early fit's PROVISIONAL
+    event) scored at ``t`` for the front axle over the anomaly's middle at ``centre``: the
+    lead's distance (`lead_at`), the ego's speed and the fusion mode there."""
     i, distance, dstd = lead_at(rows, centre)
     speed = float(rows[i, COL_V])
     v = cfg.vehicle
-    a, b = cfg.provisional_confidence_logit
-    x = a + b * math.log(max(score, 1e-9) / cfg.provisional_threshold_z)
     return AnomalyEvent(
         t_s=centre,
         t_peak_s=t,
-        t_emit_s=t,
+        t_emit_s=t_emit_s,
         s_px=math.nan,
         s_left_px=math.nan,
         s_right_px=math.nan,
@@ -135,15 +146,15 @@ def provisional_event(
         lead_distance_std_m=dstd,
         ego_speed_mps=speed if math.isfinite(speed) else None,
         mode=FusionMode(int(rows[i, COL_MODE])),
-        valid_fraction=1.0,
+        valid_fraction=valid_fraction,
         suppressed=suppressed,
         score=score,
-        threshold=cfg.provisional_threshold_z,
+        threshold=threshold,
         height_m=height_m,
         height_std_m=std_m,
         lead_speed_mps=lead_speed_mps,
         anomaly_distance_m=distance + v.rear_overhang_m + v.wheelbase_m,
-        confidence=1.0 / (1.0 + math.exp(-min(max(x, -50.0), 50.0))),
-        kind=EventKind.PROVISIONAL,
+        confidence=confidence,
+        kind=kind,
         ref=ref,
     )
