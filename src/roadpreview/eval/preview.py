@@ -42,20 +42,14 @@ def previews_of(
     the confirmed alerts of the detector's ``run`` over it, each from the frame it was
     confirmed at."""
     changed = trace["target_changed"]
-    adds: list[tuple[float, int, Alert]] = []
-    if run is not None:
-        adds = sorted(((a.t_emit_s, 1, a) for a in run.alerts), key=lambda x: x[0])
+    alerts: list[Alert] = sorted(run.alerts, key=lambda a: a.t_emit_s) if run else []
     k = 0
     out = []
     for i, sample in enumerate(trace.samples()):
         if changed[i]:
             estimator.restart()
-        while k < len(adds) and adds[k][0] <= sample.t + 1e-9:
-            _, add, alert = adds[k]
-            if add:
-                estimator.add_alert(alert)
-            else:
-                estimator.remove_alert(alert.alert_id)
+        while k < len(alerts) and alerts[k].t_emit_s <= sample.t + 1e-9:
+            estimator.add_alert(alerts[k])
             k += 1
         p = estimator.push(sample)
         if p is not None:

@@ -249,10 +249,6 @@ class ProfileEstimator:
         if alert.distance_m is not None and alert.height_mm is not None:
             self._alerts[alert.alert_id] = alert
 
-    def remove_alert(self, alert_id: int) -> None:
-        """A provisional alert was cancelled: its bins go back to the profile's estimate."""
-        self._alerts.pop(alert_id, None)
-
     def _driven_since(self, t0: float) -> float:
         """The ego's distance driven from ``t0`` to the last frame (NaN: unknown)."""
         ts, ss = self._odo_t, self._odo_s
